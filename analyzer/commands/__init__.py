@@ -1,0 +1,9 @@
+"""CLI subcommands: one module each, with ``add_subparser`` (as cantools does)."""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+from . import decode, stats
+
+SUBCOMMANDS: tuple[ModuleType, ...] = (decode, stats)

@@ -1,0 +1,120 @@
+"""Options and the read-decode loop shared by the offline commands (decode, stats)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+from decoders.registry import resolve_protocol
+from decoders.model import Record
+
+from ..pipeline import Decoding
+from ..sources.capture import CaptureReader, open_capture
+
+BATCH = 4096
+
+
+def add_input_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "file",
+        help="capture to read: candump -L .log, python-can .asc/.blf/.trc/.csv/.mf4, an "
+        "eg2scope .mcap recording, or any other file as raw serial bytes",
+    )
+    parser.add_argument(
+        "--protocol",
+        "-p",
+        default="auto",
+        metavar="NAME",
+        help="byte-stream protocol: serial (EB 90 / EE 16 frames), modbus (Modbus RTU) or "
+        "auto (default: detected from the bytes). CAN files are always decoded as CAN.",
+    )
+    parser.add_argument("--bus", metavar="NAME", help="bus name to put in records "
+                        "(default: the CAN channel in the file, or 'serial')")  # fmt: skip
+    parser.add_argument("--device", "-d", type=int, metavar="N", help="only records of device N")
+    parser.add_argument(
+        "--errors-only",
+        "-e",
+        action="store_true",
+        help="only records with errors or warnings (bad checksums, garbage, no response, ...)",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+
+
+def protocol_of(args: argparse.Namespace) -> str | None:
+    name = args.protocol
+    return None if name in (None, "auto") else resolve_protocol(name)
+
+
+def record_filter(args: argparse.Namespace) -> Callable[[Record], bool] | None:
+    device, errors_only = args.device, args.errors_only
+    if device is None and not errors_only:
+        return None
+
+    def keep(rec: Record) -> bool:
+        if device is not None and rec.device != device:
+            return False
+        return not errors_only or bool(rec.errors or rec.warnings)
+
+    return keep
+
+
+@contextmanager
+def progress_bar(reader: CaptureReader, enabled: bool) -> Iterator[Callable[[int], None]]:
+    """A progress bar on stderr while reading, only when stderr is a terminal."""
+    if not enabled or not sys.stderr.isatty():
+        yield lambda n: None
+        return
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        DownloadColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+        TransferSpeedColumn,
+    )
+
+    columns = (
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        DownloadColumn(),
+        TransferSpeedColumn(),
+        TextColumn("{task.fields[records]:,} records"),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(reader.path.name, total=reader.size or None, records=0)
+        count = 0
+
+        def tick(n: int) -> None:
+            nonlocal count
+            count += n
+            bar.update(task, completed=reader.position, records=count)
+
+        yield tick
+
+
+def decoded_batches(args: argparse.Namespace) -> Iterator[list[Record]]:
+    """Read the capture named in args, decode it, yield filtered record batches in order.
+    Damage found in the file is reported on stderr after everything before it."""
+    keep = record_filter(args)
+    with (
+        open_capture(args.file, bus=args.bus) as reader,
+        progress_bar(reader, not args.no_progress) as tick,
+    ):
+        decoding = Decoding(protocol_of(args))
+        feed = decoding.feed
+        batch: list[Record] = []
+        for item in reader:
+            batch += feed(item)
+            if len(batch) >= BATCH:
+                tick(len(batch))
+                yield batch if keep is None else [r for r in batch if keep(r)]
+                batch = []
+        batch += decoding.finish()
+        tick(len(batch))
+        yield batch if keep is None else [r for r in batch if keep(r)]
+    for err in reader.errors:
+        print(f"eg2scope: {args.file}: {err}", file=sys.stderr)

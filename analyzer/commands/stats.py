@@ -1,0 +1,82 @@
+"""``eg2scope stats FILE``: per-device and per-command counts, errors, latency, warnings."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+import orjson
+from rich.console import Console
+from rich.table import Table
+
+from ..stats import CaptureStats
+from .common import add_input_arguments, decoded_batches
+
+
+def add_subparser(sub: Any) -> None:
+    parser = sub.add_parser(
+        "stats",
+        help="summarise a capture: counts, errors, latency, warnings",
+        description=(
+            "Summarise a capture: frames per device and per command, unanswered requests, "
+            "errors (checksum, CRC, garbage, truncation), response latency p50/p95/max, the "
+            "warnings raised by the manual's rules, and notable patterns such as ID scans."
+        ),
+    )
+    add_input_arguments(parser)
+    parser.add_argument(
+        "--format", "-f", choices=("text", "json"), default="text", help="text tables "
+        "(default) or one JSON object"
+    )  # fmt: skip
+    parser.set_defaults(func=run)
+
+
+def _ms(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
+def run(args: argparse.Namespace) -> int:
+    stats = CaptureStats()
+    for batch in decoded_batches(args):
+        for rec in batch:
+            stats.add(rec)
+    data = stats.as_dict()
+    if args.format == "json":
+        sys.stdout.buffer.write(orjson.dumps(data, option=orjson.OPT_INDENT_2) + b"\n")
+        return 0
+    console = Console(highlight=False)
+    console.print(
+        f"[bold]{args.file}[/]: {data['records']:,} records, {data['frames']:,} frames "
+        f"({data['valid_frames']:,} valid), {data['garbage_bytes']:,} garbage bytes, "
+        f"{data['truncated']} truncated"
+        + (f", {data['duration_s']:.3f} s" if data["duration_s"] is not None else "")
+    )
+    for title, rows, key in (
+        ("Devices", data["devices"], None),
+        ("Commands", data["commands"], "name"),
+    ):
+        table = Table(title=title, title_justify="left")
+        for col in ("bus", "protocol", "device", *([key] if key else [])):
+            table.add_column(col)
+        for col in ("requests", "responses", "unanswered", "errors", "warnings"):
+            table.add_column(col, justify="right")
+        for col in ("p50 ms", "p95 ms", "max ms"):
+            table.add_column(col, justify="right")
+        for row in rows:
+            table.add_row(
+                row["bus"], row["protocol"], str(row["device"]),
+                *([row[key]] if key else []),
+                *(str(row[c]) for c in ("requests", "responses", "unanswered", "errors",
+                                        "warnings")),
+                _ms(row["p50_ms"]), _ms(row["p95_ms"]), _ms(row["max_ms"]),
+            )  # fmt: skip
+        console.print(table)
+    for title, counts in (("Errors", data["errors"]), ("Warnings", data["warnings"])):
+        if counts:
+            console.print(f"[bold]{title}[/]")
+            for text, n in counts.items():
+                console.print(f"  {n:>8,}  {text}", markup=False)
+    for note in data["notes"]:
+        console.print(f"[bold]Note:[/] {note}")
+    return 0

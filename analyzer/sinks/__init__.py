@@ -1,0 +1,1 @@
+"""Where records go: text, JSONL, CSV, MCAP, Rerun."""

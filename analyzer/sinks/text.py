@@ -1,0 +1,79 @@
+"""Human-readable output: one line per record.
+
+``  0.012345  can0  → ID 1     CMD_MC_MOVE_CATCH_XG   catch speed=500 force=100 g``
+Errors are shown in red and warnings in yellow when the terminal has colour.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import IO
+
+from decoders.model import FRAME, REQUEST, RESPONSE, Record
+
+RED, YELLOW, DIM, RESET = "\x1b[31m", "\x1b[33m", "\x1b[2m", "\x1b[0m"
+ARROWS = {REQUEST: "→", RESPONSE: "←"}
+
+
+def use_colour(stream: IO[str]) -> bool:
+    """Colour only on a terminal, and never when NO_COLOR is set (no-color.org)."""
+    if os.environ.get("NO_COLOR"):
+        return False
+    if os.environ.get("FORCE_COLOR"):
+        return True
+    isatty = getattr(stream, "isatty", None)
+    return bool(isatty and isatty())
+
+
+class TextFormatter:
+    """Formats records as lines; times are shown relative to the first timestamp seen."""
+
+    def __init__(self, colour: bool = False, absolute_time: bool = False) -> None:
+        self.colour = colour
+        self.absolute_time = absolute_time
+        self._t0: float | None = None
+
+    def time_column(self, rec: Record) -> str:
+        if rec.t is None:
+            where = rec.offset if rec.offset is not None else rec.index
+            return f"@{where}".rjust(11)
+        if self.absolute_time:
+            return f"{rec.t:17.6f}"
+        if self._t0 is None:
+            self._t0 = rec.t
+        return f"{rec.t - self._t0:11.6f}"
+
+    def format(self, rec: Record) -> str:
+        arrow = ARROWS.get(rec.direction or "", "·")
+        who = f"ID {rec.device}" if rec.device is not None else "-"
+        if rec.kind == FRAME:
+            name = rec.name or rec.protocol
+        else:
+            name = rec.kind.upper()
+        parts = [self.time_column(rec), f"{rec.bus:6}", arrow, f"{who:8}", f"{name:24}", rec.summary]
+        if rec.latency_ms is not None and rec.direction == RESPONSE:
+            parts.append(f"({rec.latency_ms:.2f} ms)")
+        line = " ".join(parts)
+        if rec.errors:
+            text = "  !! " + "; ".join(rec.errors)
+            line += f"{RED}{text}{RESET}" if self.colour else text
+        if rec.warnings:
+            text = "  ⚠ " + "; ".join(rec.warnings)
+            line += f"{YELLOW}{text}{RESET}" if self.colour else text
+        return line
+
+
+class TextSink:
+    """Writes formatted lines to a text stream."""
+
+    def __init__(self, out: IO[str], colour: bool | None = None, absolute_time: bool = False):
+        self.out = out
+        colour = use_colour(out) if colour is None else colour
+        self.formatter = TextFormatter(colour=colour, absolute_time=absolute_time)
+
+    def write(self, records: list[Record]) -> None:
+        fmt = self.formatter.format
+        self.out.write("".join(fmt(r) + "\n" for r in records))
+
+    def close(self) -> None:
+        self.out.flush()

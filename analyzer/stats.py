@@ -1,0 +1,177 @@
+"""Summary statistics over a record stream, in constant memory.
+
+Latency percentiles come from a log-bucketed histogram (1 % relative resolution, as
+HdrHistogram does) so that a capture of any length needs the same memory; the maximum is exact.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+from decoders.model import FRAME, GARBAGE, REQUEST, RESPONSE, TRUNCATED, Record
+
+_LOG_STEP = math.log(1.01)
+_NUMBER = re.compile(r"-?\d+(\.\d+)?")
+
+
+class LatencyHistogram:
+    def __init__(self) -> None:
+        self.buckets: Counter[int] = Counter()
+        self.count = 0
+        self.max = 0.0
+
+    def add(self, ms: float) -> None:
+        self.count += 1
+        self.max = max(self.max, ms)
+        self.buckets[int(math.log(max(ms, 1e-6)) / _LOG_STEP)] += 1
+
+    def percentile(self, p: float) -> float | None:
+        if not self.count:
+            return None
+        rank = p / 100.0 * self.count
+        seen = 0
+        for bucket in sorted(self.buckets):
+            seen += self.buckets[bucket]
+            if seen >= rank:
+                return min(self.max, math.exp((bucket + 0.5) * _LOG_STEP))
+        return self.max
+
+    def summary(self) -> dict[str, float | None]:
+        def r(x: float | None) -> float | None:
+            return None if x is None else round(x, 3)
+
+        return {
+            "p50_ms": r(self.percentile(50)),
+            "p95_ms": r(self.percentile(95)),
+            "max_ms": r(self.max) if self.count else None,
+        }
+
+
+@dataclass
+class Counts:
+    requests: int = 0
+    responses: int = 0
+    unanswered: int = 0
+    errors: int = 0
+    warnings: int = 0
+    latency: LatencyHistogram = field(default_factory=LatencyHistogram)
+
+    def add(self, rec: Record) -> None:
+        if rec.direction == REQUEST:
+            self.requests += 1
+            if rec.expects_response and rec.pair is None:
+                self.unanswered += 1
+        elif rec.direction == RESPONSE:
+            self.responses += 1
+            if rec.latency_ms is not None:
+                self.latency.add(rec.latency_ms)
+        if rec.errors:
+            self.errors += 1
+        if rec.warnings:
+            self.warnings += 1
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "requests": self.requests,
+            "responses": self.responses,
+            "unanswered": self.unanswered,
+            "errors": self.errors,
+            "warnings": self.warnings,
+            **self.latency.summary(),
+        }
+
+
+def warning_kind(text: str) -> str:
+    """Group warnings by their wording, with the numbers taken out."""
+    return _NUMBER.sub("N", text)
+
+
+class CaptureStats:
+    def __init__(self) -> None:
+        self.records = 0
+        self.frames = 0
+        self.valid = 0
+        self.bytes_garbage = 0
+        self.truncated = 0
+        self.by_protocol: Counter[str] = Counter()
+        self.devices: dict[tuple[str, str, int], Counts] = {}
+        self.commands: dict[tuple[str, str, int, str], Counts] = {}
+        self.errors: Counter[str] = Counter()
+        self.warnings: Counter[str] = Counter()
+        self.unanswered_ids: dict[tuple[str, str], set[int]] = {}
+        self.first_t: float | None = None
+        self.last_t: float | None = None
+
+    def add(self, rec: Record) -> None:
+        self.records += 1
+        if rec.t is not None:
+            if self.first_t is None:
+                self.first_t = rec.t
+            self.last_t = rec.t
+        self.by_protocol[rec.protocol] += 1
+        if rec.kind == GARBAGE:
+            self.bytes_garbage += rec.length
+        elif rec.kind == TRUNCATED:
+            self.truncated += 1
+        elif rec.kind == FRAME:
+            self.frames += 1
+            if not rec.errors:
+                self.valid += 1
+        for e in rec.errors:
+            self.errors[warning_kind(e.split(":")[0] if rec.kind == GARBAGE else e)] += 1
+        for w in rec.warnings:
+            self.warnings[warning_kind(w)] += 1
+        if rec.device is None or rec.kind != FRAME:
+            return
+        dev_key = (rec.bus, rec.protocol, rec.device)
+        counts = self.devices.get(dev_key)
+        if counts is None:
+            counts = self.devices[dev_key] = Counts()
+        counts.add(rec)
+        cmd_key = (*dev_key, rec.name or f"code {rec.code}")
+        cmd = self.commands.get(cmd_key)
+        if cmd is None:
+            cmd = self.commands[cmd_key] = Counts()
+        cmd.add(rec)
+        if rec.direction == REQUEST and rec.expects_response and rec.pair is None:
+            self.unanswered_ids.setdefault((rec.bus, rec.protocol), set()).add(rec.device)
+
+    def scans(self) -> list[str]:
+        """Unanswered requests to many different IDs: a host scanning for devices."""
+        notes = []
+        for (bus, protocol), ids in sorted(self.unanswered_ids.items()):
+            if len(ids) >= 5:
+                notes.append(
+                    f"{bus} {protocol}: unanswered requests to {len(ids)} different IDs "
+                    f"({min(ids)}-{max(ids)}): looks like an ID scan, not a fault"
+                )
+        return notes
+
+    def as_dict(self) -> dict[str, Any]:
+        duration = None
+        if self.first_t is not None and self.last_t is not None:
+            duration = round(self.last_t - self.first_t, 6)
+        return {
+            "records": self.records,
+            "frames": self.frames,
+            "valid_frames": self.valid,
+            "garbage_bytes": self.bytes_garbage,
+            "truncated": self.truncated,
+            "duration_s": duration,
+            "protocols": dict(self.by_protocol),
+            "devices": [
+                {"bus": b, "protocol": p, "device": d, **c.as_dict()}
+                for (b, p, d), c in sorted(self.devices.items())
+            ],
+            "commands": [
+                {"bus": b, "protocol": p, "device": d, "name": n, **c.as_dict()}
+                for (b, p, d, n), c in sorted(self.commands.items())
+            ],
+            "errors": dict(self.errors.most_common()),
+            "warnings": dict(self.warnings.most_common()),
+            "notes": self.scans(),
+        }

@@ -1,0 +1,49 @@
+"""The decoder registry: protocol names and aliases to decoder classes (as python-can keys its
+interfaces by name), and protocol detection for byte streams.
+"""
+
+from __future__ import annotations
+
+from .eg2_serial import Eg2SerialDecoder
+from .framing import ByteStreamDecoder
+from .model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Chunk
+from .modbus_rtu import ModbusRtuDecoder
+
+STREAM_DECODERS: dict[str, type[ByteStreamDecoder]] = {
+    EG2_SERIAL: Eg2SerialDecoder,
+    MODBUS_RTU: ModbusRtuDecoder,
+}
+
+ALIASES: dict[str, str] = {
+    "serial": EG2_SERIAL,
+    "eg2-serial": EG2_SERIAL,
+    "rs232": EG2_SERIAL,
+    "modbus": MODBUS_RTU,
+    "modbus-rtu": MODBUS_RTU,
+    "rs485": MODBUS_RTU,
+    "can": EG2_CAN,
+    "eg2-can": EG2_CAN,
+}
+
+
+def resolve_protocol(name: str) -> str:
+    """A protocol name or alias to its canonical name; ValueError lists the choices."""
+    try:
+        return ALIASES[name.lower()]
+    except KeyError:
+        raise ValueError(
+            f"unknown protocol {name!r}; choose one of: {', '.join(sorted(ALIASES))}"
+        ) from None
+
+
+def detect_protocol(sample: bytes) -> str | None:
+    """Which byte-stream protocol a sample of a line holds: the one that finds the most
+    valid frames in it (None if neither finds any)."""
+    best, best_count = None, 0
+    for name, cls in STREAM_DECODERS.items():
+        dec = cls()
+        records = dec.feed(Chunk(sample)) + dec.finish()
+        count = sum(1 for r in records if r.ok)
+        if count > best_count:
+            best, best_count = name, count
+    return best
