@@ -34,10 +34,12 @@ class Item:
 
 
 class Decoding:
-    """Items in, Records out, in stream order. ``protocol`` None: detect per byte stream."""
+    """Items in, Records out, in stream order. ``protocol`` None: detect per byte stream;
+    ``per_bus`` fixes the protocol of named buses (the demo knows what each line speaks)."""
 
-    def __init__(self, protocol: str | None = None) -> None:
+    def __init__(self, protocol: str | None = None, per_bus: dict[str, str] | None = None) -> None:
         self.protocol = protocol
+        self.per_bus = per_bus or {}
         self.linter = TimingLinter()
         self.pairer = Pairer()
         self._streams: dict[tuple[str, str], ByteStreamDecoder] = {}
@@ -64,6 +66,20 @@ class Decoding:
             yield from self.feed(item)
         yield from self.finish()
 
+    def tick(self, now: float) -> list[Record]:
+        """Live sources call this when idle: quiet lines decide their held bytes and requests
+        that timed out are released."""
+        records: list[Record] = []
+        for key in list(self._undetected):
+            # a live line may be slow to fill the detection sample: decide once a frame shows
+            sample = b"".join(c.data for c in self._undetected[key])
+            protocol = self.protocol or detect_protocol(sample)
+            if protocol is not None:
+                records += self._replay(key, self._new_stream_decoder(key, protocol))
+        for dec in self._streams.values():
+            records += dec.idle(now)
+        return self._post(records) + self.pairer.tick(now)
+
     def finish(self) -> list[Record]:
         records: list[Record] = []
         for key in list(self._undetected):
@@ -88,8 +104,9 @@ class Decoding:
     def _start_stream(self, key: tuple[str, str], chunk: Chunk) -> ByteStreamDecoder | None:
         held = self._undetected.setdefault(key, [])
         held.append(chunk)
-        if self.protocol is not None:
-            return self._new_stream_decoder(key, self.protocol)
+        fixed = self.per_bus.get(key[0], self.protocol)
+        if fixed is not None:
+            return self._new_stream_decoder(key, fixed)
         if sum(len(c.data) for c in held) < DETECT_BYTES:
             return None
         return self._new_stream_decoder(key, self._choose(key))

@@ -46,7 +46,7 @@ def serial_session() -> bytes:
     ex(255, 0x16, b"", None)  # broadcast stop: nobody answers
     ex(1, 0x14, b"", b.u16le(500, 80, 100))  # read state: probable layout
     ex(1, 0x77, b"\x01\x02", b"\x01")  # unknown command
-    out.extend(s(1, 0x41, b"", bytes((4, 1, 41)) + b.u16le(600, 100), response=True)[:9])
+    out.extend(s(1, 0x41, bytes((4, 1, 41)) + b.u16le(600, 100), response=True)[:9])
     return bytes(out)  # ends with a truncated response
 
 
@@ -87,10 +87,10 @@ def can_session() -> list[CanFrame]:
         frames.append(frame)
 
     def poll(dev: int, opening: int, force: int, temp: int, state: int) -> None:
-        add(b.can_read_request(dev, 1120, 8), 0.004)
+        add(b.can_read_request(dev, 1120, 8), 0.006)
         data = b.u16le(force, opening, rng.randint(0, 400), temp)
         add(b.can_read_response(dev, 1120, data), 0.0004 + rng.random() * 0.0002)
-        add(b.can_read_request(dev, 1128, 4, padded=dev == 2), 0.004)
+        add(b.can_read_request(dev, 1128, 4, padded=dev == 2), 0.006)
         add(b.can_read_response(dev, 1128, b.u16le(0, state)), 0.0004)
 
     for dev in (1, 2):
@@ -118,12 +118,7 @@ def main() -> None:
     (HERE / "serial_session.bin").write_bytes(serial_session())
     (HERE / "modbus_session.bin").write_bytes(modbus_session())
     frames = can_session()
-    lines = []
-    for f in frames:
-        if f.is_error:
-            lines.append(f"({f.t:.6f}) can0 {f.arbitration_id:08X}#{f.data.hex().upper()}")
-        else:
-            lines.append(b.candump_line(f))
+    lines = [b.candump_line(f) for f in frames]
     (HERE / "can_pick_place.log").write_text("\n".join(lines) + "\n")
     print("wrote", ", ".join(p.name for p in sorted(HERE.glob("*_*.*")) if p.suffix != ".py"))
 

@@ -84,6 +84,15 @@ class ByteStreamDecoder:
         """End of stream: decide every byte still held."""
         return self._scan(final=True)
 
+    idle_s: float = 0.1  # a live line quiet this long will not finish the frame it started
+
+    def idle(self, now: float) -> list[Record]:
+        """Live streams: when the line has been quiet for idle_s, decide the bytes held as if
+        the stream had ended (a frame is sent in one go; its tail will not come later)."""
+        if self._buf and self._last_t is not None and now - self._last_t > self.idle_s:
+            return self._scan(final=True)
+        return []
+
     def gap_at(self, pos: int) -> bool:
         """True if a silence longer than gap_s preceded buffer index pos (a boundary hint)."""
         offset = self._base + pos

@@ -42,7 +42,8 @@ class Pairer:
         self._seq += 1
         if self._pending and rec.t is not None:
             self._expire(rec.t)
-        if rec.kind == FRAME and rec.pair_key is not None:
+        # a frame that fails its checksum cannot be trusted to say who it is for
+        if rec.kind == FRAME and rec.pair_key is not None and not rec.errors:
             if rec.direction == REQUEST:
                 self._request(rec)
             elif rec.direction == RESPONSE:
@@ -62,6 +63,13 @@ class Pairer:
         for rec in records:
             out += self.push(rec)
         return out
+
+    def tick(self, now: float) -> list[Record]:
+        """Live streams: time passes with no record (a quiet bus); expire and release."""
+        if not self._pending:
+            return []
+        self._expire(now)
+        return self._release()
 
     def flush(self) -> list[Record]:
         """End of stream: every request still waiting was never answered."""
@@ -85,10 +93,9 @@ class Pairer:
                     self._unanswered(old, "no response before the next request")
                     del self._pending[key]
         else:
-            key = self._key(rec)
-            old = self._pending.pop(key, None)
-            if old is not None:
-                self._unanswered(old, "no response before the next request with the same ID")
+            same = self._pending.pop(self._key(rec), None)
+            if same is not None:
+                self._unanswered(same, "no response before the next request with the same ID")
         if rec.expects_response:
             self._pending[self._key(rec)] = rec
 

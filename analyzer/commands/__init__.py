@@ -4,6 +4,6 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from . import decode, stats
+from . import bridge, decode, demo, live, record, sim, stats
 
-SUBCOMMANDS: tuple[ModuleType, ...] = (decode, stats)
+SUBCOMMANDS: tuple[ModuleType, ...] = (decode, stats, live, record, bridge, sim, demo)

@@ -12,6 +12,7 @@ from decoders.model import Record
 
 from ..pipeline import Decoding
 from ..sources.capture import CaptureReader, open_capture
+from ..sources.pacing import paced, parse_speed
 
 BATCH = 4096
 
@@ -38,6 +39,13 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
         "-e",
         action="store_true",
         help="only records with errors or warnings (bad checksums, garbage, no response, ...)",
+    )
+    parser.add_argument(
+        "--speed",
+        default="max",
+        metavar="X",
+        help="replay with the capture's own timing sped up X times (1 = real time, 10, ...) or "
+        "'max' (default: as fast as possible)",
     )
     parser.add_argument("--no-progress", action="store_true", help="never show a progress bar")
 
@@ -106,10 +114,12 @@ def decoded_batches(args: argparse.Namespace) -> Iterator[list[Record]]:
     ):
         decoding = Decoding(protocol_of(args))
         feed = decoding.feed
+        speed = parse_speed(args.speed)
+        size = BATCH if speed is None else 1  # paced replay: show each record as it comes
         batch: list[Record] = []
-        for item in reader:
+        for item in paced(reader, speed):
             batch += feed(item)
-            if len(batch) >= BATCH:
+            if len(batch) >= size:
                 tick(len(batch))
                 yield batch if keep is None else [r for r in batch if keep(r)]
                 batch = []

@@ -50,7 +50,7 @@ class TextFormatter:
             name = rec.name or rec.protocol
         else:
             name = rec.kind.upper()
-        parts = [self.time_column(rec), f"{rec.bus:6}", arrow, f"{who:8}", f"{name:24}", rec.summary]
+        parts = [self.time_column(rec), f"{rec.bus:6}", arrow, f"{who:8}", f"{name:26}", rec.summary]
         if rec.latency_ms is not None and rec.direction == RESPONSE:
             parts.append(f"({rec.latency_ms:.2f} ms)")
         line = " ".join(parts)
@@ -77,3 +77,11 @@ class TextSink:
 
     def close(self) -> None:
         self.out.flush()
+
+
+def format_event(message: str, bus: str, level: int, colour: bool) -> str:
+    """A source event (port lost, reopened, drops ...) as a line that stands out."""
+    line = f"-- {bus}: {message}"
+    if not colour or level < 3:
+        return line
+    return f"{RED if level >= 4 else YELLOW}{line}{RESET}"

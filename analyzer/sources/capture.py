@@ -136,3 +136,6 @@ def open_capture(path: str | os.PathLike[str], bus: str | None = None) -> Captur
     opener = CAPTURE_READERS.get(p.suffix.lower(), RawBytesReader)
     return opener(p, bus)
 
+
+
+from . import mcap_reader  # noqa: E402, F401  (registers .mcap; imported last: it imports this module)

@@ -132,3 +132,13 @@ def test_lint_ignores_untimed_records() -> None:
     a, b = rec(REQUEST, 1), rec(REQUEST, 1)
     lint([a, b])
     assert not a.warnings and not b.warnings
+
+
+def test_corrupt_frames_are_not_paired() -> None:
+    bad = rec(REQUEST, 1)
+    bad.errors.append("checksum error: expected 0x0A, got 0x50")
+    good, resp = rec(REQUEST, 1), rec(RESPONSE, 1)
+    out = run([bad, good, resp])
+    assert out == [bad, good, resp]
+    assert not bad.warnings and bad.pair is None
+    assert good.pair == resp.seq

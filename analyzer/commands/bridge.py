@@ -1,0 +1,39 @@
+"""``eg2scope bridge HOST_PORT DEVICE_PORT``: an inline tap between a host and a gripper."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from ..sources.serial_tap import SerialBridge
+from .livesource import serial_bus_name
+from .session import add_session_arguments, run_session
+
+
+def add_subparser(sub: Any) -> None:
+    parser = sub.add_parser(
+        "bridge",
+        help="relay between two serial ports and decode both directions",
+        description=(
+            "An inline tap for lines a passive tap cannot reach: connect the host to "
+            "HOST_PORT and the gripper to DEVICE_PORT; every byte is relayed unchanged, as soon "
+            "as it arrives, and decoded with its direction known. Unlike the other taps this "
+            "one is in the line (not passive). Ctrl-C ends."
+        ),
+    )
+    parser.add_argument("host_port", metavar="HOST_PORT", help="port the host controller is on")
+    parser.add_argument("device_port", metavar="DEVICE_PORT", help="port the gripper is on")
+    parser.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    parser.add_argument("--protocol", "-p", default="auto", metavar="NAME",
+                        help="serial, modbus or auto (default: detected)")  # fmt: skip
+    parser.add_argument("--bus", metavar="NAME", help="bus name in records")
+    parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
+    add_session_arguments(parser, record_required=False)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    tap = SerialBridge(serial_bus_name(args), args.host_port, args.device_port,
+                       baudrate=args.baud)  # fmt: skip
+    return run_session(args, [tap], show=args.format, status=sys.stderr.isatty())

@@ -1,0 +1,41 @@
+"""``eg2scope live``: watch a CAN bus or a serial line and print what it says, decoded."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from .livesource import add_source_arguments, open_taps
+from .session import add_session_arguments, run_session
+
+
+def add_subparser(sub: Any) -> None:
+    parser = sub.add_parser(
+        "live",
+        help="watch a live CAN bus or serial line, decoded",
+        description=(
+            "Watch a live bus passively and print every frame decoded, as it happens. The "
+            "CAN tap requests listen-only where the interface allows and never sends; serial "
+            "taps never write to the ports they watch. A port or interface that goes away is "
+            "reported and reopened when it comes back; the gap is marked. Ctrl-C ends."
+        ),
+        epilog=(
+            "examples:\n"
+            "  eg2scope live -i socketcan -c can0 -b 500000\n"
+            "  eg2scope live --serial /dev/ttyUSB0 --protocol modbus\n"
+            "  eg2scope live --serial /dev/ttyUSB0 --serial /dev/ttyUSB1   # one adapter per "
+            "RS232 wire\n"
+            "  eg2scope live -i pcan -c PCAN_USBBUS1 -o run.mcap            # and record"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_source_arguments(parser)
+    add_session_arguments(parser, record_required=False)
+    parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text",
+                        help="stdout format (default text)")  # fmt: skip
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    return run_session(args, open_taps(args), show=args.format, status=sys.stderr.isatty())

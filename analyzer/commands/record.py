@@ -1,0 +1,46 @@
+"""``eg2scope record``: record any live source to MCAP (raw, decoded, device state, events)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from .livesource import add_source_arguments, open_taps
+from .session import add_session_arguments, run_session
+
+
+def add_subparser(sub: Any) -> None:
+    parser = sub.add_parser(
+        "record",
+        help="record a live source to an MCAP file",
+        description=(
+            "Record a live source to MCAP, Foxglove-compatible: /raw/<bus> (the bytes and "
+            "frames as captured, so the recording can be decoded again later), /decoded/<bus>, "
+            "/state/<bus>/<device> and /events/<bus>. Chunks are flushed at least twice a "
+            "second, so a recorder that is killed loses at most the last second. Replay with "
+            "'eg2scope decode run.mcap'."
+        ),
+        epilog=(
+            "examples:\n"
+            "  eg2scope record -i socketcan -c can0 -o run.mcap\n"
+            "  eg2scope record --serial /dev/ttyUSB0 -o run.mcap --show\n"
+            "  eg2scope record --demo -o demo.mcap --duration 10"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_source_arguments(parser)
+    parser.add_argument("--demo", action="store_true",
+                        help="record the built-in demo (simulated grippers on all three buses)")  # fmt: skip
+    add_session_arguments(parser, record_required=True)
+    parser.add_argument("--show", action="store_true", help="also print the decoded text")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.demo:
+        from .demo import run_demo
+
+        return run_demo(args, show="text" if args.show else None)
+    show = "text" if args.show else None
+    return run_session(args, open_taps(args), show=show, status=sys.stderr.isatty())

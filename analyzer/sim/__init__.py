@@ -1,0 +1,6 @@
+"""Simulated EG2-4XX grippers for demos, tests and benchmarks.
+
+``gripper.GripperModel`` is the device (pure, time passed in); ``ptybus.PtyBus`` a virtual
+multi-drop serial line of real ptys; ``endpoints`` serves models over the regular serial
+protocol, Modbus RTU and CAN; ``host`` is a scripted host program (a pick-and-place cycle).
+"""

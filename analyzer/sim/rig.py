@@ -1,0 +1,116 @@
+"""The demo rig: simulated grippers on all three buses, a host program on each running a
+pick-and-place cycle, and a passive tap on each bus exactly as on real hardware.
+
+serial (RS232): PtyBus[gripper, host, tap]   grippers 1 and 2, regular serial protocol
+rs485  (Modbus): PtyBus[gripper, host, tap]  grippers 1 and 2, the host uses short registers
+can0   (CAN):    python-can virtual channel  grippers 1 and 2
+
+Each tap opens the bus's ``tap`` pty (or the virtual channel) and knows nothing of the
+simulator: it sees the same bytes and frames it would see on a real line.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from types import TracebackType
+from typing import Any
+
+from decoders.model import EG2_SERIAL, MODBUS_RTU
+
+from ..sources.can_tap import CanTap
+from ..sources.live import Tap, wait_open
+from ..sources.serial_tap import SerialTap
+from .endpoints import CanGripperServer, ModbusGripperServer, SerialGripperServer
+from .gripper import GripperModel
+from .host import HostQuirks, HostResult, run_host_cycle
+from .ptybus import PtyBus
+
+BUSES = ("serial", "modbus", "can")
+BUS_NAMES = {"serial": "rs232", "modbus": "rs485", "can": "can0"}
+
+
+class DemoRig:
+    """Context manager: start() everything, ``taps`` to watch it, stop() in the right order."""
+
+    def __init__(self, buses: tuple[str, ...] = BUSES, noise: float = 0.0, seed: int = 1) -> None:
+        unknown = set(buses) - set(BUSES)
+        if unknown:
+            raise ValueError(f"unknown demo bus {', '.join(sorted(unknown))}; choose from "
+                             f"{', '.join(BUSES)}")  # fmt: skip
+        self.buses = buses
+        self.noise = noise
+        self.seed = seed
+        self.stop_event = threading.Event()
+        self.taps: list[Tap] = []
+        self.protocols: dict[str, str] = {}  # bus name -> protocol, for the decoder
+        self.results: dict[str, HostResult] = {}
+        self._servers: list[Any] = []
+        self._ptybuses: list[PtyBus] = []
+        self._threads: list[threading.Thread] = []
+        self.can_channel = f"eg2scope-demo-{os.getpid()}-{time.monotonic_ns()}"
+
+    @staticmethod
+    def _models() -> dict[int, GripperModel]:
+        now = time.monotonic()
+        return {1: GripperModel(1, now=now, object_width=420.0),
+                2: GripperModel(2, now=now, object_width=250.0)}  # fmt: skip
+
+    def start(self) -> DemoRig:
+        noise = {"corrupt": self.noise, "garbage": self.noise / 2, "drop": self.noise / 2}
+        for bus in self.buses:
+            name = BUS_NAMES[bus]
+            result = self.results[name] = HostResult()
+            quirks = HostQuirks(short_registers=bus == "modbus", continuous=bus == "can")
+            if bus == "can":
+                server: Any = CanGripperServer(self._models(), channel=self.can_channel,
+                                               seed=self.seed, **noise)  # fmt: skip
+                target: Any = self.can_channel
+                self.taps.append(CanTap(name, "virtual", self.can_channel))
+            else:
+                line = PtyBus(["gripper", "host", "tap"])
+                self._ptybuses.append(line)
+                cls = SerialGripperServer if bus == "serial" else ModbusGripperServer
+                server = cls(line.path("gripper"), self._models(), seed=self.seed, **noise)
+                target = line.path("host")
+                self.taps.append(SerialTap(name, line.path("tap")))
+                self.protocols[name] = EG2_SERIAL if bus == "serial" else MODBUS_RTU
+            server.start()
+            self._servers.append(server)
+            thread = threading.Thread(
+                target=run_host_cycle,
+                args=(bus, target, (1, 2), None, self.stop_event, quirks),
+                kwargs={"result": result},
+                name=f"demo-host-{bus}",
+                daemon=True,
+            )
+            self._threads.append(thread)
+        return self
+
+    def run_hosts(self) -> None:
+        """Start the host programs once the taps are listening, so nothing is missed."""
+        wait_open(self.taps)
+        for thread in self._threads:
+            thread.start()
+
+    def stop(self) -> None:
+        self.stop_event.set()
+        for thread in self._threads:
+            if thread.is_alive():
+                thread.join(2.0)
+        for server in self._servers:
+            server.stop()
+        for line in self._ptybuses:
+            line.close()
+
+    def __enter__(self) -> DemoRig:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()

@@ -1,0 +1,407 @@
+"""Live CAN tap (python-can): listen-only wherever the interface allows it, never sends.
+
+``CanTap`` opens ``can.Bus(interface=..., channel=..., bitrate=..., receive_own_messages=False)``
+with listen-only requested through the interface's own option (DESIGN.md: pcan/systec
+``state=BusState.PASSIVE``, vector/slcan/nixnet ``listen_only=True``, kvaser
+``driver_mode=False``; also cantact ``monitor=True`` and seeedstudio
+``operation_mode="silent"``). socketcan has no such option: listen-only is a property of the
+link (``ip link set can0 type can ... listen-only on``), so the tap reads
+``ip -details link show <channel>`` to tell. The outcome is ``self.passive`` ("yes", "no",
+"unknown"), ``self.settings`` and a "passive" SourceEvent.
+
+Frames reach the TapQueue through python-can's ``can.Notifier`` and a ``can.Listener`` that
+converts each ``can.Message`` to a ``CanFrame`` (the queue never blocks). When the interface
+goes down (the receive thread raises), the tap reports ``lost``, shuts the bus down and retries
+every ``retry_interval`` seconds until it opens again (``reopened``, with the gap). The tap
+never calls ``send``.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import threading
+import time
+from typing import Any
+
+import can
+
+from decoders.model import CanFrame
+
+from ..pipeline import Item
+from .live import ERROR, INFO, WARNING, Tap, TapQueue
+
+RETRY_INTERVAL = 0.5
+RECV_TIMEOUT = 0.1  # Notifier's receive timeout: bounds how long stopping takes
+JOIN_TIMEOUT = 2.0
+REBASE_THRESHOLD = 24 * 3600.0  # timestamps further than this from time.time() are not epoch
+
+# interface -> the keyword arguments that put it in listen-only mode
+LISTEN_ONLY_KWARGS: dict[str, dict[str, Any]] = {
+    "pcan": {"state": can.BusState.PASSIVE},
+    "systec": {"state": can.BusState.PASSIVE},
+    "vector": {"listen_only": True},
+    "slcan": {"listen_only": True},
+    "nixnet": {"listen_only": True},
+    "kvaser": {"driver_mode": False},
+    "cantact": {"monitor": True},
+    "seeedstudio": {"operation_mode": "silent"},
+}
+# simulated buses: no wire, no controller; passive because the tap never sends
+SIMULATED = {"virtual": "virtual bus (simulated)", "udp_multicast": "UDP multicast bus (simulated)"}
+
+NEVER_SENDS = "the tap never sends"
+ACKS = "its controller acknowledges frames and may send error frames"
+
+
+def _describe(exc: BaseException) -> str:
+    text = str(exc)
+    name = type(exc).__name__
+    return f"{name}: {text}" if text else name
+
+
+def _plain(value: Any) -> Any:
+    if value is None or isinstance(value, str | int | float | bool):
+        return value
+    if isinstance(value, can.BusState):
+        return value.name
+    return str(value)
+
+
+def _same_option(key: str, given: Any, wanted: Any) -> bool:
+    if key == "state" and isinstance(given, str):
+        return given.upper() == wanted.name
+    return bool(given == wanted)
+
+
+def listen_only_plan(
+    interface: str, kwargs: dict[str, Any], listen_only: bool = True
+) -> tuple[dict[str, Any], str, str]:
+    """For interfaces with a listen-only option (not socketcan): the keyword arguments to add,
+    the resulting passive state and a sentence saying why."""
+    if interface in SIMULATED:
+        return {}, "yes", f"{SIMULATED[interface]}, {NEVER_SENDS}"
+    wanted = LISTEN_ONLY_KWARGS.get(interface)
+    if wanted is None:
+        return (
+            {},
+            "unknown",
+            f"python-can has no listen-only option for interface {interface!r}: unless the "
+            f"adapter is configured listen-only, {ACKS}; {NEVER_SENDS}",
+        )
+    options = ", ".join(f"{k}={_plain(v)!r}" for k, v in wanted.items())
+    if not listen_only:
+        return {}, "no", f"listen-only not requested ({options} not set): {ACKS}"
+    for key, value in wanted.items():
+        if key in kwargs and not _same_option(key, kwargs[key], value):
+            return (
+                {},
+                "no",
+                f"listen-only overridden by {key}={_plain(kwargs[key])!r}: {ACKS}",
+            )
+    return dict(wanted), "yes", f"listen-only requested ({options}); {NEVER_SENDS}"
+
+
+_VCAN = re.compile(r"^\s*vcan\b", re.MULTILINE)
+_CAN_CTRLMODE = re.compile(r"\bcan\s+<([^>]*)>")
+_CAN_LINK = re.compile(r"\blink/can\b")
+
+
+def parse_ip_link_details(channel: str, text: str) -> tuple[str, str]:
+    """Passive state of a socketcan link from ``ip -details link show <channel>`` output."""
+    hint = (
+        f"for a passive tap: sudo ip link set {channel} down && sudo ip link set {channel} "
+        f"type can bitrate <bitrate> listen-only on && sudo ip link set {channel} up"
+    )
+    if _VCAN.search(text):
+        return "yes", f"{channel} is a vcan (virtual kernel bus, no wire); {NEVER_SENDS}"
+    match = _CAN_CTRLMODE.search(text)
+    if match and "LISTEN-ONLY" in [m.strip() for m in match.group(1).split(",")]:
+        return "yes", f"listen-only is on for {channel} (ip link); {NEVER_SENDS}"
+    if _CAN_LINK.search(text):
+        return "unknown", f"listen-only is off for {channel}: {ACKS}; {hint}"
+    return "unknown", f"cannot tell whether {channel} is listen-only (ip link); {hint}"
+
+
+def socketcan_passive(channel: str) -> tuple[str, str]:
+    """Ask ``ip -details link show`` whether a socketcan link is listen-only."""
+    try:
+        proc = subprocess.run(
+            ["ip", "-details", "link", "show", channel],
+            capture_output=True,
+            text=True,
+            timeout=2.0,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError) as exc:
+        return "unknown", f"cannot read the listen-only state of {channel} ({exc}); {NEVER_SENDS}"
+    if proc.returncode != 0:
+        why = proc.stderr.strip() or f"ip exited with {proc.returncode}"
+        return "unknown", f"cannot read the listen-only state of {channel} ({why})"
+    return parse_ip_link_details(channel, proc.stdout)
+
+
+def _socketcan_link_down(channel: str) -> bool:
+    """True when /sys says the interface exists but is administratively down."""
+    try:
+        with open(f"/sys/class/net/{channel}/flags") as f:
+            flags = int(f.read().strip(), 16)
+    except (OSError, ValueError):
+        return False
+    return not flags & 0x1  # IFF_UP
+
+
+class _FrameListener(can.Listener):
+    """can.Message -> CanFrame -> TapQueue, on the Notifier's thread. Never blocks."""
+
+    def __init__(self, tap: CanTap, out: TapQueue, wake: threading.Event) -> None:
+        self.tap = tap
+        self.out = out
+        self.wake = wake
+        self.error: BaseException | None = None
+        self.halted = threading.Event()
+        self.frames = 0
+        self._offset: float | None = None
+
+    def on_message_received(self, msg: can.Message) -> None:
+        ts = msg.timestamp
+        if not ts:
+            t = time.time()
+        else:
+            if self._offset is None:
+                self._offset = self._rebase(ts)
+            t = ts + self._offset
+        channel = msg.channel
+        frame = CanFrame(
+            t=t,
+            arbitration_id=msg.arbitration_id,
+            data=bytes(msg.data),
+            is_extended=msg.is_extended_id,
+            is_remote=msg.is_remote_frame,
+            is_error=msg.is_error_frame,
+            is_fd=msg.is_fd,
+            dlc=msg.dlc,
+            channel=str(channel) if channel is not None else self.tap.channel_name,
+        )
+        self.frames += 1
+        self.out.put(Item(self.tap.bus, frame))
+
+    def _rebase(self, ts: float) -> float:
+        now = time.time()
+        if abs(now - ts) <= REBASE_THRESHOLD:
+            return 0.0
+        self.tap.event(
+            self.out,
+            INFO,
+            "info",
+            f"{self.tap.interface} timestamps are not on the host clock (first {ts:.6f}); "
+            "frames are rebased to the host clock at the first frame",
+        )
+        return now - ts
+
+    def on_error(self, exc: Exception) -> None:
+        if self.error is None:
+            self.error = exc
+            self.wake.set()
+        # keep the Notifier's thread from spinning on a dead bus until the tap halts it
+        self.halted.wait(1.0)
+
+    def stop(self) -> None:
+        self.halted.set()
+
+
+class CanTap(Tap):
+    """Listen-only tap on one CAN interface/channel, python-can's way of naming them."""
+
+    def __init__(
+        self,
+        bus_name: str,
+        interface: str,
+        channel: Any,
+        bitrate: int | None = None,
+        *,
+        listen_only: bool = True,
+        retry_interval: float = RETRY_INTERVAL,
+        recv_timeout: float = RECV_TIMEOUT,
+        **kwargs: Any,
+    ) -> None:
+        self.interface = interface
+        self.channel = channel
+        self.channel_name = str(channel)
+        self.bitrate = bitrate
+        self.listen_only = listen_only
+        self.retry_interval = retry_interval
+        self.recv_timeout = recv_timeout
+        self.kwargs = dict(kwargs)
+        self.frames = 0
+        self._extra, passive, self.passive_reason = self._plan()
+        super().__init__(bus_name, passive, {})
+        self._update_settings()
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._out: TapQueue | None = None
+        self.is_open = False
+
+    # -- passive state ---------------------------------------------------------------------
+
+    def _plan(self) -> tuple[dict[str, Any], str, str]:
+        if self.interface == "socketcan":
+            # the state is read from the link at start (and at every reopen)
+            return {}, "unknown", "socketcan: listen-only state not read yet"
+        return listen_only_plan(self.interface, self.kwargs, self.listen_only)
+
+    def _check_socketcan(self) -> None:
+        if self.interface == "socketcan":
+            self.passive, self.passive_reason = socketcan_passive(self.channel_name)
+            self._update_settings()
+
+    def _update_settings(self) -> None:
+        self.settings = {
+            "kind": "can",
+            "interface": self.interface,
+            "channel": self.channel_name,
+            "bitrate": self.bitrate,
+            "listen_only_options": {k: _plain(v) for k, v in self._extra.items()},
+            "options": {k: _plain(v) for k, v in self.kwargs.items()},
+            "passive": self.passive,
+            "passive_reason": self.passive_reason,
+        }
+
+    def _passive_event(self, out: TapQueue) -> None:
+        level = INFO if self.passive == "yes" else WARNING
+        word = {"yes": "passive", "no": "not passive"}.get(self.passive, "passive: unknown")
+        self.event(out, level, "passive", f"{word}: {self.passive_reason}")
+
+    # -- public ----------------------------------------------------------------------------
+
+    @property
+    def running(self) -> bool:
+        return self._out is not None
+
+    def start(self, out: TapQueue) -> None:
+        if self._out is not None:
+            raise RuntimeError(f"tap {self.bus!r} is already running")
+        self._out = out
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._check_socketcan()
+        self._passive_event(out)
+        self._thread = threading.Thread(
+            target=self._run,
+            args=(out, self._stop, self._wake),
+            name=f"eg2scope can {self.interface}:{self.channel_name}",
+            daemon=True,
+        )
+        self._thread.start()
+
+    def stop(self) -> None:
+        out = self._out
+        if out is None:
+            return
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(JOIN_TIMEOUT)
+        self.event(
+            out,
+            INFO,
+            "closed",
+            f"closed {self._label()} ({self.frames} frames)",
+        )
+        self._out = None
+
+    # -- the supervisor thread -------------------------------------------------------------
+
+    def _label(self) -> str:
+        return f"{self.interface} channel {self.channel_name}"
+
+    def _open(self) -> can.BusABC:
+        kwargs = {**self.kwargs, **self._extra}
+        if self.bitrate is not None:
+            kwargs["bitrate"] = self.bitrate
+        bus = can.Bus(
+            interface=self.interface,
+            channel=self.channel,
+            receive_own_messages=False,
+            **kwargs,
+        )
+        if self.interface == "socketcan" and _socketcan_link_down(self.channel_name):
+            _shutdown(bus)
+            raise OSError(f"interface {self.channel_name} is down")
+        return bus
+
+    def _run(self, out: TapQueue, stop: threading.Event, wake: threading.Event) -> None:
+        every = f"retrying every {self.retry_interval:g} s"
+        first_try = time.monotonic()
+        lost_at: float | None = None
+        reported = False
+        ever_open = False
+        while not stop.is_set():
+            listener = _FrameListener(self, out, wake)
+            try:
+                bus = self._open()
+                wake.clear()
+                try:
+                    notifier = can.Notifier(bus, [listener], timeout=self.recv_timeout)
+                except Exception:
+                    _shutdown(bus)
+                    raise
+            except Exception as exc:
+                if not reported and not ever_open:
+                    self.event(
+                        out,
+                        ERROR,
+                        "open",
+                        f"cannot open {self._label()}: {_describe(exc)}; {every}",
+                    )
+                reported = True
+                stop.wait(self.retry_interval)
+                continue
+            retried = reported or ever_open
+            reported = False
+            now = time.monotonic()
+            if not ever_open:
+                waited = now - first_try
+                after = f" after {waited:.2f} s of retries" if waited >= self.retry_interval else ""
+                bitrate = f" at {self.bitrate} bit/s" if self.bitrate else ""
+                self.event(out, INFO, "open", f"opened {self._label()}{bitrate}{after}")
+            else:
+                gap = now - (lost_at if lost_at is not None else now)
+                self.event(
+                    out,
+                    INFO,
+                    "reopened",
+                    f"reopened {self._label()} after a {gap:.2f} s gap "
+                    "(frames on the bus during the gap were not captured)",
+                )
+            if retried and self.interface == "socketcan":
+                # the link may have been (re)created meanwhile, with its default settings
+                before = self.passive
+                self._check_socketcan()
+                if self.passive != before:
+                    self._passive_event(out)
+            ever_open = True
+            self.is_open = True
+            while not stop.is_set() and listener.error is None:
+                wake.wait(0.5)
+            error = listener.error
+            self.is_open = False
+            listener.halted.set()
+            try:
+                notifier.stop(timeout=JOIN_TIMEOUT)
+            except Exception:
+                pass
+            _shutdown(bus)
+            self.frames += listener.frames
+            if error is None or stop.is_set():
+                break
+            lost_at = time.monotonic()
+            self.event(out, WARNING, "lost", f"lost {self._label()}: {_describe(error)}; {every}")
+
+
+def _shutdown(bus: can.BusABC) -> None:
+    try:
+        bus.shutdown()
+    except Exception:
+        pass

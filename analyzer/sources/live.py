@@ -1,0 +1,107 @@
+"""The contract between live taps (capture threads) and the decoding consumer.
+
+A Tap runs its own capture thread(s) and puts Items (raw chunks or CAN frames, stamped on
+arrival) and SourceEvents (port lost, reopened, passive or not, ...) into a TapQueue. The queue
+is bounded: a capture thread never blocks on a slow consumer; when the queue is full the item is
+dropped and counted, and the consumer reports the count (drops are never silent).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..pipeline import Item
+
+# foxglove.Log levels
+DEBUG, INFO, WARNING, ERROR = 1, 2, 3, 4
+
+
+@dataclass(slots=True)
+class SourceEvent:
+    """Something that happened to a source rather than on the bus."""
+
+    t: float
+    bus: str
+    level: int
+    message: str
+    kind: str = "info"  # "open", "passive", "lost", "reopened", "drops", "closed", "info"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"t": self.t, "bus": self.bus, "level": self.level, "kind": self.kind,
+                "message": self.message}  # fmt: skip
+
+
+class TapQueue:
+    """Bounded hand-over from capture threads to the consumer, counting what it had to drop."""
+
+    def __init__(self, maxsize: int = 200_000) -> None:
+        self._q: queue.Queue[Item | SourceEvent] = queue.Queue(maxsize)
+        self._lock = threading.Lock()
+        self.dropped = 0
+        self._dropped_reported = 0
+
+    def put(self, item: Item | SourceEvent) -> None:
+        """Never blocks: a full queue drops the item and counts it."""
+        try:
+            self._q.put_nowait(item)
+        except queue.Full:
+            with self._lock:
+                self.dropped += 1
+
+    def get_batch(self, timeout: float = 0.05, max_items: int = 10_000) -> list[Item | SourceEvent]:
+        """Everything waiting (up to max_items), waiting up to timeout for the first."""
+        try:
+            first = self._q.get(timeout=timeout)
+        except queue.Empty:
+            return []
+        batch = [first]
+        get = self._q.get_nowait
+        try:
+            while len(batch) < max_items:
+                batch.append(get())
+        except queue.Empty:
+            pass
+        return batch
+
+    def new_drops(self) -> int:
+        """Drops since the last call (for a 'dropped N items' event)."""
+        with self._lock:
+            n = self.dropped - self._dropped_reported
+            self._dropped_reported = self.dropped
+        return n
+
+
+@dataclass
+class Tap:
+    """Base of the live sources. ``start`` launches capture threads feeding ``out``; ``stop``
+    ends them and closes the hardware. ``passive`` is "yes", "no" or "unknown": whether the
+    tap is guaranteed never to transmit on the bus it watches."""
+
+    bus: str
+    passive: str = "unknown"
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    is_open: bool = True  # the tap is capturing now (taps that open asynchronously override)
+
+    def start(self, out: TapQueue) -> None:
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def event(self, out: TapQueue, level: int, kind: str, message: str) -> None:
+        out.put(SourceEvent(time.time(), self.bus, level, message, kind))
+
+
+def wait_open(taps: list[Tap], timeout: float = 3.0) -> bool:
+    """Wait until every tap is capturing (they open their ports on their own threads)."""
+    deadline = time.monotonic() + timeout
+    while not all(t.is_open for t in taps):
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
+    return True

@@ -1,0 +1,654 @@
+"""The EG2-4X0 CAN register protocol (reference section 3): CanFrame -> Record.
+
+The 29-bit identifier packs ``reserved(1) | operation(2) | start address(12) | device(14)``.
+Operation 0 reads N bytes of registers, 1 writes them, 2 and 3 ("finger positioning move",
+"finger servo follow") are named by the manual with no payload layout and are shown raw.
+
+Requests and responses share one identifier and CAN frames carry no sender, so direction comes
+from the frame's shape and from a table of pending requests per identifier:
+
+- read request: DLC 1 with data[0] = N (1-8), or DLC 8 with the other 7 bytes zero;
+  read response: DLC N, the register bytes, low byte first;
+- write request: DLC N, the register bytes; write response: DLC 1 (or 8, zero padded) with
+  data[0] = N.
+
+A frame that fits both shapes (a DLC-1 write, a zero-padded 8-byte read) is a response when a
+request of the matching length is pending on its identifier, else a request (and says what else
+it could be). A response with nothing pending is decoded as a response when only the response
+shape fits; the pairing stage flags it as unmatched. Broadcast requests (device 16383) are never
+pending, and a pending request older than ``PENDING_TIMEOUT_S`` is forgotten when frames carry
+times.
+
+N bytes from address A cover the registers at A, A+2, ... (little endian, signed where the
+register is). An odd address or length is legal on the wire: it is flagged and the byte that
+covers half a register is shown raw (``fields["partial"]``), read as CAN addresses counting
+bytes (an odd address is the high byte of the register below it; inference).
+
+Everything else on the bus (11-bit identifiers, remote, error and CAN FD frames) is shown as a
+foreign ``can`` record; nothing here raises.
+
+Speed: the decoded part of a record is built once per distinct frame. Frames without register
+values (read requests, write responses) are memoised by (identifier, data, direction); frames
+with values (read responses, write requests) keep the last frame per identifier, so an idle
+gripper's answers cost a dict look-up, and a changing one reuses a per-identifier layout and a
+per-register value cache. ``fields`` may be shared between records; ``errors`` and ``warnings``
+are copied per record (later stages append to them).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Collection
+from dataclasses import dataclass
+from typing import Any, Final
+
+from .model import EG2_CAN, FOREIGN_CAN, FRAME, REQUEST, RESPONSE, CanFrame, Record
+from .registers import (
+    SAVE_REGISTERS,
+    Register,
+    by_can_address,
+    fault_text,
+    state_text,
+)
+
+OPERATIONS: Final = ("read", "write", "positioning move", "servo follow")
+OP_READ: Final = 0
+OP_WRITE: Final = 1
+OP_POSITIONING_MOVE: Final = 2
+OP_SERVO_FOLLOW: Final = 3
+
+BROADCAST: Final = 0x3FFF  # device 16383
+RESERVED_BIT: Final = 1 << 28
+MAX_ID: Final = 0x1FFFFFFF
+MAP_FIRST, MAP_LAST = 1002, 1130  # CAN byte addresses of registers 1001 ... 1065
+
+# A pending request older than this is forgotten (the slowest answer, to a save, takes about
+# 850 ms; clients time out after 20-30 ms). Only applies when both frames carry a time.
+PENDING_TIMEOUT_S: Final = 2.0
+MEMO_LIMIT: Final = 50_000
+PENDING_LIMIT: Final = 50_000
+
+_ZERO7: Final = bytes(7)
+
+# SocketCAN error classes (linux/can/error.h), carried in an error frame's identifier
+_CAN_ERR_CLASSES: Final = (
+    (0x001, "TX timeout"),
+    (0x002, "lost arbitration"),
+    (0x004, "controller problem"),
+    (0x008, "protocol violation"),
+    (0x010, "transceiver status"),
+    (0x020, "no ACK on transmission"),
+    (0x040, "bus off"),
+    (0x080, "bus error"),
+    (0x100, "controller restarted"),
+)
+
+# direction tags (part of the memo key)
+_TAG_REQUEST: Final = 0
+_TAG_RESPONSE: Final = 1
+_TAG_NONE: Final = 2
+# a response whose length does not match the pending request: _TAG_MISMATCH + expected length
+_TAG_MISMATCH: Final = 16
+
+
+def pack_id(op: int, address: int, device: int, reserved: bool = False) -> int:
+    """The 29-bit identifier of an operation (0-3) at a start address (0-4095) on a device."""
+    if not 0 <= op <= 3:
+        raise ValueError(f"operation must be 0-3, not {op}")
+    if not 0 <= address <= 0xFFF:
+        raise ValueError(f"address must be 0-4095, not {address}")
+    if not 0 <= device <= 0x3FFF:
+        raise ValueError(f"device must be 0-16383, not {device}")
+    return (RESERVED_BIT if reserved else 0) | op << 26 | address << 14 | device
+
+
+def unpack_id(arbitration_id: int) -> tuple[int, int, int, bool]:
+    """(operation, start address, device, reserved bit set) of a 29-bit identifier."""
+    return (
+        (arbitration_id >> 26) & 3,
+        (arbitration_id >> 14) & 0xFFF,
+        arbitration_id & 0x3FFF,
+        bool(arbitration_id & RESERVED_BIT),
+    )
+
+
+def can_error_text(error_class: int) -> str:
+    """An error frame's identifier (SocketCAN error class bits) in words."""
+    words = [text for bit, text in _CAN_ERR_CLASSES if error_class & bit]
+    if not words:
+        return "CAN error frame"
+    return f"CAN error frame: {', '.join(words)} (class 0x{error_class:03X})"
+
+
+def _register_at(address: int) -> Register:
+    """The register at an even CAN address; a flagged placeholder outside the manual's map."""
+    reg = by_can_address(address)
+    if reg is not None:
+        return reg
+    number = 1000 + (address - 1000) // 2
+    return Register(
+        number,
+        f"ADDR_{address}",
+        f"addr_{address}",
+        "?",
+        None,
+        None,
+        documented=False,
+        meaning=f"CAN address {address}, outside the register map",
+    )
+
+
+def _plural(n: int) -> str:
+    return "1 byte" if n == 1 else f"{n} bytes"
+
+
+def _hex(data: bytes) -> str:
+    return data.hex(" ").upper()
+
+
+def _span_registers(address: int, n: int) -> list[Register]:
+    """Every register that a span of n bytes from address touches, in order."""
+    first = address & ~1
+    last = (address + n - 1) & ~1
+    return [_register_at(a) for a in range(first, last + 1, 2)] if n > 0 else []
+
+
+def _span_name(regs: list[Register]) -> str | None:
+    if not regs:
+        return None
+    if len(regs) == 1:
+        return regs[0].name
+    return f"{regs[0].name}..{regs[-1].name}"
+
+
+def _span_keys(regs: list[Register]) -> str:
+    if len(regs) == 1:
+        return regs[0].key
+    return f"{regs[0].key}..{regs[-1].key}"
+
+
+def _span_warnings(address: int, n: int, regs: list[Register], write: bool) -> list[str]:
+    """Flags for how a span is laid out: odd address or length, unknown or read-only registers."""
+    warnings: list[str] = []
+    if address & 1:
+        reg = _register_at(address - 1)
+        warnings.append(
+            f"odd start address {address}: the first byte is the high byte of {reg.name} "
+            f"(address {address - 1})"
+        )
+    if (address + n) & 1 and n > 0:
+        reg = _register_at(address + n - 1)
+        warnings.append(
+            f"the span ends inside a register ({_plural(n)} from {address}): the last byte is "
+            f"the low byte of {reg.name} (address {address + n - 1})"
+        )
+    elif n & 1:
+        warnings.append(f"odd length {n}: registers are 2 bytes")
+    for reg in regs:
+        if not reg.documented:
+            if MAP_FIRST <= reg.can_address <= MAP_LAST:
+                warnings.append(f"undocumented address {reg.can_address} (register {reg.number})")
+            else:
+                warnings.append(
+                    f"address {reg.can_address} is outside the register map "
+                    f"({MAP_FIRST}-{MAP_LAST})"
+                )
+        elif write and reg.access == "ro":
+            warnings.append(f"write to read-only register {reg.name} ({reg.key})")
+    return warnings
+
+
+# (protocol, direction, device, code, name, fields, errors, warnings, summary, pair_key,
+#  expects_response, is_save)
+_Template = tuple[
+    str,
+    str | None,
+    int | None,
+    int | None,
+    str | None,
+    dict[str, Any],
+    list[str],
+    list[str],
+    str,
+    tuple[Any, ...] | None,
+    bool,
+    bool,
+]
+
+
+# one register value, decoded once per (register, raw value): (value, summary text, special);
+# special is None for the usual value, else (range warning, extra field such as state_text,
+# whether it triggers a save)
+_Special = tuple[str | None, tuple[str, Any] | None, bool]
+_ValueEntry = tuple[int, str, _Special | None]
+_VALUE_CACHE_LIMIT: Final = 4096
+_value_caches: dict[int, dict[int, _ValueEntry]] = {}  # CAN address -> raw value -> entry
+
+
+def _value_entry(cache: dict[int, _ValueEntry], reg: Register, raw: int) -> _ValueEntry:
+    value = reg.value(raw)
+    extra: tuple[str, Any] | None = None
+    if reg.key == "state":
+        extra = ("state_text", state_text(value))
+    elif reg.key == "fault":
+        extra = ("fault_text", fault_text(value))
+    problem = reg.range_warning(value)
+    save = value == 1 and reg.number in SAVE_REGISTERS
+    special = (problem, extra, save) if problem is not None or extra or save else None
+    if len(cache) >= _VALUE_CACHE_LIMIT:
+        cache.clear()
+    entry = cache[raw] = (value, reg.describe(value), special)
+    return entry
+
+
+@dataclass(frozen=True, slots=True)
+class _Layout:
+    """Everything about a value-carrying frame (read response, write request) that its
+    identifier, length and direction fix; only the register values vary."""
+
+    direction: str
+    device: int
+    code: int
+    name: str | None
+    fields: dict[str, Any]
+    warnings: list[str]
+    prefix: str  # of the summary
+    pair_key: tuple[Any, ...]
+    expects: bool
+    ambiguity: str  # "read" / "write": the frame may also fit the other direction's shape
+    head: Register | None  # odd start address: the first byte is this register's high byte
+    start: int  # offset of the first whole register
+    unpack: Callable[[bytes, int], tuple[Any, ...]]  # the whole registers, little endian
+    slots: tuple[tuple[str, Register, dict[int, _ValueEntry]], ...]
+    tail: Register | None  # the span ends inside this register: the last byte is its low byte
+
+
+class Eg2CanDecoder:
+    """Decode CAN frames of EG2-4X0 grippers: one Record per frame, in order.
+
+    ``devices``, when given, limits EG2 decoding to those device IDs (plus broadcast); frames
+    for any other device are shown as foreign ``can`` records.
+    """
+
+    protocol = EG2_CAN
+
+    def __init__(self, bus: str = "can0", *, devices: Collection[int] | None = None) -> None:
+        self.bus = bus
+        self.devices = frozenset(devices) if devices is not None else None
+        # arbitration id -> (byte count, time of the request); the id fixes the operation
+        self._pending: dict[int, tuple[int, float | None]] = {}
+        self._memo: dict[tuple[Any, ...], _Template] = {}
+        # (arbitration id, length, direction tag) -> the last read response or write request:
+        # (data, template, layout)
+        self._last: dict[int, tuple[bytes, _Template, _Layout]] = {}
+
+    def reset(self) -> None:
+        """Forget pending requests (a new capture, or a gap in the stream)."""
+        self._pending.clear()
+
+    def finish(self) -> list[Record]:
+        """Records still held back at the end of the stream: none, CAN frames are whole."""
+        return []
+
+    def decode(self, frame: CanFrame, index: int) -> Record:
+        """The Record of one frame. Never raises."""
+        try:
+            data = frame.data
+            if type(data) is not bytes:
+                data = bytes(data)
+            aid = frame.arbitration_id
+            n = len(data)
+            dlc = frame.dlc
+            if (
+                not frame.is_extended
+                or frame.is_remote
+                or frame.is_error
+                or frame.is_fd
+                or n > 8
+                or (dlc is not None and dlc != n)
+                or not 0 <= aid <= 0x1FFFFFFF
+                or (
+                    self.devices is not None
+                    and aid & 0x3FFF not in self.devices
+                    and aid & 0x3FFF != BROADCAST
+                )
+            ):
+                return self._foreign(frame, index, data)
+
+            # direction: the frame's shape, then the pending request on this identifier
+            op = (aid >> 26) & 3
+            pending = self._pending
+            t = frame.t
+            pend = pending.get(aid)
+            if (
+                pend is not None
+                and t is not None
+                and pend[1] is not None
+                and t - pend[1] > PENDING_TIMEOUT_S
+            ):
+                pend = None
+            if op == 0:  # read
+                if pend is not None and pend[0] == n:
+                    tag = _TAG_RESPONSE
+                    valued = True
+                    del pending[aid]
+                elif (n == 1 or (n == 8 and data.endswith(_ZERO7))) and 1 <= data[0] <= 8:
+                    tag = _TAG_REQUEST
+                    valued = False
+                    if aid & 0x3FFF != BROADCAST:  # nobody answers a broadcast
+                        if len(pending) >= PENDING_LIMIT:
+                            pending.clear()
+                        pending[aid] = (data[0], t)
+                elif n:
+                    valued = True
+                    if pend is not None:
+                        tag = _TAG_MISMATCH + pend[0]
+                        del pending[aid]
+                    else:
+                        tag = _TAG_RESPONSE
+                else:
+                    tag = _TAG_NONE
+                    valued = False
+            elif op == 1:  # write
+                if (
+                    pend is not None
+                    and (n == 1 or (n == 8 and data.endswith(_ZERO7)))
+                    and data[0] == pend[0]
+                ):
+                    tag = _TAG_RESPONSE
+                    valued = False
+                    del pending[aid]
+                elif n:
+                    tag = _TAG_REQUEST
+                    valued = True
+                    if aid & 0x3FFF != BROADCAST:
+                        if len(pending) >= PENDING_LIMIT:
+                            pending.clear()
+                        pending[aid] = (n, t)
+                else:
+                    tag = _TAG_NONE
+                    valued = False
+            else:
+                tag = _TAG_NONE
+                valued = False
+
+            if valued:
+                # register values change from frame to frame: remember the last frame per
+                # identifier, length and direction (an idle gripper answers the same bytes)
+                # with the layout that the three fix
+                lkey = aid << 10 | n << 6 | tag
+                lasts = self._last
+                last = lasts.get(lkey)
+                if last is None:
+                    layout = _make_layout(aid, n, tag)
+                    tpl = _fill(layout, data)
+                    if len(lasts) >= MEMO_LIMIT:
+                        lasts.clear()
+                    lasts[lkey] = (data, tpl, layout)
+                elif last[0] == data:
+                    tpl = last[1]
+                else:
+                    layout = last[2]
+                    tpl = _fill(layout, data)
+                    lasts[lkey] = (data, tpl, layout)
+            else:
+                key = (aid, data, tag)
+                memo = self._memo
+                hit = memo.get(key)
+                if hit is None:
+                    if len(memo) >= MEMO_LIMIT:
+                        memo.clear()
+                    hit = memo[key] = _build_other(aid, data, tag)
+                tpl = hit
+            (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv) = tpl  # fmt: skip
+            return Record(
+                t, self.bus, pr, FRAME, n, data, None, index, di, dv, co, na, fi, er.copy(),
+                wa.copy(), su, -1, None, None, pk, ex, sv,
+            )  # fmt: skip
+        except Exception as exc:  # a decoder bug must not stop a capture: show it on the frame
+            raw = bytes(getattr(frame, "data", b"") or b"")
+            return Record(
+                t=getattr(frame, "t", None),
+                bus=self.bus,
+                protocol=FOREIGN_CAN,
+                kind=FRAME,
+                length=len(raw),
+                raw=raw,
+                index=index,
+                errors=[f"internal decoder error: {exc!r}"],
+                summary="undecodable frame",
+            )
+
+    # -- the decoded part of a record, built once per distinct frame ------------------------
+
+    # -- frames that are not EG2 ------------------------------------------------------------
+
+    def _foreign(self, frame: CanFrame, index: int, data: bytes) -> Record:
+        length = frame.length
+        key = (
+            "foreign",
+            frame.arbitration_id,
+            data,
+            frame.is_extended,
+            frame.is_remote,
+            frame.is_error,
+            frame.is_fd,
+            length,
+            self.devices is not None,
+        )
+        memo = self._memo
+        tpl = memo.get(key)
+        if tpl is None:
+            if len(memo) >= MEMO_LIMIT:
+                memo.clear()
+            tpl = memo[key] = _build_foreign(frame, data, length, self.devices is not None)
+        (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv) = tpl  # fmt: skip
+        return Record(
+            frame.t, self.bus, pr, FRAME, length, data, None, index, di, dv, co, na, fi,
+            er.copy(), wa.copy(), su, -1, None, None, pk, ex, sv,
+        )  # fmt: skip
+
+
+def _id_fields(aid: int, n: int) -> tuple[dict[str, Any], list[str]]:
+    """The fields and warnings every EG2 frame of this identifier and length has."""
+    op, address, device, reserved = unpack_id(aid)
+    fields: dict[str, Any] = {
+        "op": OPERATIONS[op],
+        "address": address,
+        "id": f"0x{aid:08X}",
+        "dlc": n,
+    }
+    warnings: list[str] = []
+    if reserved:
+        warnings.append("reserved identifier bit 28 is set")
+    if device == 0:
+        warnings.append("device 0 is outside the settable IDs 1-16382")
+    if device == BROADCAST:
+        fields["broadcast"] = True
+    return fields, warnings
+
+
+def _make_layout(aid: int, n: int, tag: int) -> _Layout:
+    """The fixed part of a read response or write request of n bytes."""
+    op, address, device, _ = unpack_id(aid)
+    fields, warnings = _id_fields(aid, n)
+    regs = _span_registers(address, n)
+    fields["length"] = n
+    fields["registers"] = [r.name for r in regs]
+    write = op == OP_WRITE
+    if tag >= _TAG_MISMATCH:
+        asked = tag - _TAG_MISMATCH
+        warnings.append(
+            f"response length mismatch: the pending request asked for {_plural(asked)}, "
+            f"the response carries {n}"
+        )
+    warnings += _span_warnings(address, n, regs, write=write)
+    head = _register_at(address - 1) if address & 1 else None
+    start = 1 if head is not None else 0
+    whole = (n - start) // 2
+    slots = tuple(
+        (reg.name, reg, _value_caches.setdefault(reg.can_address, {}))
+        for reg in (_register_at(address + start + 2 * k) for k in range(whole))
+    )
+    tail = _register_at(address + n - 1) if (n - start) & 1 else None
+    return _Layout(
+        direction=REQUEST if write else RESPONSE,
+        device=device,
+        code=op,
+        name=_span_name(regs),
+        fields=fields,
+        warnings=warnings,
+        prefix=f"write {_plural(n)} at {address}: " if write else "-> ",
+        pair_key=(aid,),
+        expects=write and device != BROADCAST,
+        ambiguity="write" if write else "read",
+        head=head,
+        start=start,
+        unpack=struct.Struct(f"<{whole}H").unpack_from,
+        slots=slots,
+        tail=tail,
+    )
+
+
+def _fill(layout: _Layout, data: bytes) -> _Template:
+    """A layout with the register values of one frame."""
+    fields = layout.fields.copy()
+    warnings = layout.warnings.copy()
+    n = len(data)
+    if (n == 1 or (n == 8 and data.endswith(_ZERO7))) and 1 <= data[0] <= 8:
+        if layout.ambiguity == "read":
+            warnings.append(
+                f"could also be a repeated read request of {_plural(data[0])} "
+                "(taken as the response to the pending request)"
+            )
+        else:
+            warnings.append(
+                f"could also be the response to a write of {_plural(data[0])} "
+                "whose request was not seen"
+            )
+    values: dict[str, int] = {}
+    parts: list[str] = []
+    partial: list[dict[str, Any]] = []
+    is_save = False
+    head = layout.head
+    if head is not None:
+        address = head.can_address + 1
+        partial.append(
+            {"address": address, "byte": f"{data[0]:02X}", "register": head.name, "half": "high"}
+        )
+        parts.append(f"byte {address}=0x{data[0]:02X}")
+    for raw, (name, reg, cache) in zip(
+        layout.unpack(data, layout.start), layout.slots, strict=False
+    ):
+        entry = cache.get(raw)
+        if entry is None:
+            entry = _value_entry(cache, reg, raw)
+        values[name] = entry[0]
+        parts.append(entry[1])
+        special = entry[2]
+        if special is not None:
+            problem, extra, save = special
+            if problem is not None:
+                warnings.append(problem)
+            if extra is not None:
+                fields[extra[0]] = extra[1]
+            if save:
+                is_save = True
+    tail = layout.tail
+    if tail is not None:
+        address = tail.can_address
+        partial.append(
+            {"address": address, "byte": f"{data[-1]:02X}", "register": tail.name, "half": "low"}
+        )
+        parts.append(f"byte {address}=0x{data[-1]:02X}")
+    fields["values"] = values
+    if partial:
+        fields["partial"] = partial
+    return (
+        EG2_CAN, layout.direction, layout.device, layout.code, layout.name, fields, [],
+        warnings, layout.prefix + ", ".join(parts), layout.pair_key, layout.expects, is_save,
+    )  # fmt: skip
+
+
+def _build_other(aid: int, data: bytes, tag: int) -> _Template:
+    """Frames that carry no register values: read requests, write responses, frames without
+    data, and operations 2 and 3."""
+    op, address, device, _ = unpack_id(aid)
+    n = len(data)
+    fields, warnings = _id_fields(aid, n)
+    errors: list[str] = []
+    direction: str | None = None
+    name: str | None = None
+    if op == OP_READ and tag == _TAG_REQUEST:
+        direction = REQUEST
+        count = data[0]
+        regs = _span_registers(address, count)
+        name = _span_name(regs)
+        fields["length"] = count
+        fields["registers"] = [r.name for r in regs]
+        if n == 8:
+            fields["padded"] = True
+        warnings += _span_warnings(address, count, regs, write=False)
+        summary = f"read {_plural(count)} at {address} ({_span_keys(regs)})"
+    elif op == OP_WRITE and tag == _TAG_RESPONSE:
+        direction = RESPONSE
+        count = data[0]
+        regs = _span_registers(address, count)
+        name = _span_name(regs)
+        fields["written_bytes"] = count
+        fields["registers"] = [r.name for r in regs]
+        if n == 8:
+            fields["padded"] = True
+        summary = f"-> wrote {_plural(count)}"
+    elif op in (OP_READ, OP_WRITE):  # no data at all
+        what = "read" if op == OP_READ else "write"
+        errors.append(f"{what} frame without data: neither a request nor a response")
+        summary = f"{what} at {address}: no data"
+    else:
+        name = OPERATIONS[op]
+        fields["data"] = _hex(data)
+        warnings.append(
+            f"operation {op} ({OPERATIONS[op]}): the manual gives no payload layout, shown raw"
+        )
+        summary = f"{OPERATIONS[op]} at {address} [{n}] {_hex(data)}".rstrip()
+    pair_key = (aid,) if direction is not None else None
+    expects = direction == REQUEST and device != BROADCAST
+    return (EG2_CAN, direction, device, op, name, fields, errors, warnings, summary, pair_key,
+            expects, False)  # fmt: skip
+
+
+def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) -> _Template:
+    aid = frame.arbitration_id
+    errors: list[str] = []
+    warnings: list[str] = []
+    extended = frame.is_extended
+    ident = f"0x{aid:08X}" if extended else f"0x{aid:03X}"
+    fields: dict[str, Any] = {"id": ident, "dlc": length, "extended": extended}
+    kind = "extended" if extended else "standard"
+    if frame.is_error:
+        text = can_error_text(aid)
+        errors.append(text)
+        fields["error_class"] = aid
+        fields["data"] = _hex(data)
+        summary = f"{text} [{len(data)}] {_hex(data)}".rstrip()
+        return (FOREIGN_CAN, None, None, None, None, fields, errors, warnings, summary, None,
+                False, False)  # fmt: skip
+    if not 0 <= aid <= (MAX_ID if extended else 0x7FF):
+        warnings.append(f"identifier {aid:#x} does not fit in {29 if extended else 11} bits")
+    if frame.is_remote:
+        warnings.append("remote frame")
+        summary = f"remote {kind} {ident} [{length}]"
+    else:
+        if frame.is_fd:
+            fields["fd"] = True
+            kind = "FD " + kind
+        elif len(data) > 8:
+            warnings.append(f"{len(data)} data bytes in a classic CAN frame")
+        elif frame.dlc is not None and frame.dlc != len(data):
+            warnings.append(f"DLC {frame.dlc} with {len(data)} data bytes")
+        elif extended and filtered:
+            fields["eg2_device"] = aid & 0x3FFF  # left out by the decoder's device filter
+        summary = f"{kind} {ident} [{len(data)}] {_hex(data)}".rstrip()
+    fields["data"] = _hex(data)
+    return (FOREIGN_CAN, None, None, None, None, fields, errors, warnings, summary, None,
+            False, False)  # fmt: skip

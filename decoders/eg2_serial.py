@@ -1,0 +1,482 @@
+"""The EG2-4X1 regular serial protocol (RS232), reference section 1.
+
+Frame: ``EB 90 | ID | LEN | CMD | DATA (LEN-1) | SUM`` from the host, ``EE 16 ...`` from the
+gripper; the whole frame is LEN + 5 bytes and SUM = (ID + LEN + CMD + DATA) & 0xFF. Values are
+u16 little endian.
+
+Built like a scapy/Wireshark dissector: ``COMMANDS`` is a table of messages keyed by CMD, each
+with its manual name, a summary verb and its request and response layouts (lists of fields with
+struct format, unit and documented range). The few payloads that a flat list cannot describe
+(set ID by LEN, the run state, the undocumented 0x14 reply, the hand-compatible codes) have a
+small decode function instead. A CMD in no table still decodes, as ``UNKNOWN_0xNN``.
+
+Speed: a live 115200-baud line carries under 2k frames/s, but a capture replay wants 300k/s.
+Decoding is a pure function of the frame bytes and the same few dozen frames repeat all day, so
+the decode is memoised by raw bytes; a hit costs one dict lookup plus building the Record. The
+cached fields dict is shared by every Record of those bytes: later stages must not mutate it.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
+from functools import partial
+from typing import Any, Final
+
+from .framing import NEED_MORE, ByteStreamDecoder
+from .model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
+from .registers import fault_text, opening_mm, state_text
+
+__all__ = [
+    "BROADCAST",
+    "COMMANDS",
+    "REQUEST_HEADER",
+    "RESPONSE_HEADER",
+    "Command",
+    "Eg2SerialDecoder",
+    "Field",
+    "build_frame",
+    "checksum",
+]
+
+REQUEST_HEADER: Final = b"\xeb\x90"  # host -> gripper
+RESPONSE_HEADER: Final = b"\xee\x16"  # gripper -> host
+BROADCAST: Final = 255  # every gripper executes it, none answers
+
+_HEADER_PREFIXES: Final = (REQUEST_HEADER, RESPONSE_HEADER, b"\xeb", b"\xee")
+# A header, or its first byte as the last byte held (the second may be on its way).
+_HEADER_RE: Final = re.compile(rb"\xeb(?:\x90|\Z)|\xee(?:\x16|\Z)")
+
+# The decode of one message body: (fields, summary, errors, warnings). The header-level parts
+# (id, checksum, broadcast) are added by the caller.
+Decoded = tuple[dict[str, Any], str, list[str], list[str]]
+
+
+def checksum(body: bytes | bytearray) -> int:
+    """SUM over ID + LEN + CMD + DATA (everything between the header and SUM)."""
+    return sum(body) & 0xFF
+
+
+def build_frame(direction: str, device: int, code: int, data: bytes = b"") -> bytes:
+    """Encode one frame (for simulators and tests): header, ID, LEN, CMD, DATA, SUM."""
+    header = REQUEST_HEADER if direction == REQUEST else RESPONSE_HEADER
+    body = bytes((device, len(data) + 1, code)) + data
+    return header + body + bytes((checksum(body),))
+
+
+def _hex(data: bytes) -> str:
+    return data.hex(" ").upper()
+
+
+# Lookup tables for the decode's miss path (a moving gripper's replies rarely repeat).
+_MM: Final = [opening_mm(v) for v in range(1001)]
+_FAULT_WORDS: Final = [fault_text(b) for b in range(256)]  # shared lists: fields are read-only
+_FAULT_SUMMARY: Final = [", ".join(words) or "no fault" for words in _FAULT_WORDS]
+_MM_TEXT: Final = [str(mm) for mm in _MM]  # float formatting is the slow part of a summary
+_STATE_TEXT: Final = [state_text(s) for s in range(256)]
+
+
+def _mm(value: int) -> float:
+    return _MM[value] if value <= 1000 else opening_mm(value)
+
+
+def _mm_text(value: int) -> str:
+    return _MM_TEXT[value] if value <= 1000 else str(opening_mm(value))
+
+
+# -- the declarative part --------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Field:
+    """One value in a payload. unit "mm" marks a 0-1000 opening, also shown in millimetres."""
+
+    key: str  # name in Record.fields (vectors.json's names)
+    fmt: str  # struct code, little endian: "B" u8, "H" u16
+    label: str  # name in the summary line and in range warnings
+    unit: str = ""
+    lo: int | None = None  # documented range, None where the manual gives none
+    hi: int | None = None
+
+
+# A layout is a list of fields, or a function for a payload a flat list cannot describe.
+CustomDecode = Callable[["Command", str, bytes, int], Decoded]
+Layout = tuple[Field, ...] | CustomDecode
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    code: int
+    name: str  # the manual's identifier
+    verb: str  # request summary ("catch", "read limits")
+    request: Layout = ()
+    response: Layout = ()  # () means the one status byte of a write/action command
+    alias: str | None = None  # the hand's name for the same code (section 1.2)
+
+
+SPEED = Field("speed", "H", "speed", "", 1, 1000)
+FORCE = Field("force_g", "H", "force", "g", 50, 1000)
+LIMIT_MAX = Field("max", "H", "max", "mm", 0, 1000)
+LIMIT_MIN = Field("min", "H", "min", "mm", 0, 1000)
+SEEK_POSITION = Field("position", "H", "position", "mm", 1, 1000)  # the 0x54 section: 1-1000
+ACT_POSITION = Field("position", "H", "position", "mm", 0, 1000)
+
+_RUNSTATE = struct.Struct("<BBBHH")  # state, fault, temperature, position, force setting
+_ID_RANGE = (1, 254)
+
+
+def _words(n: int) -> str:
+    return f"{n} data byte" + ("" if n == 1 else "s")
+
+
+def _mismatch(cmd: Command, direction: str, expected: str, data: bytes) -> Decoded:
+    """A payload that does not fit the documented layout: show it raw, never guess."""
+    fields: dict[str, Any] = {"data": _hex(data)}
+    if cmd.alias is not None and len(data) >= 2:
+        # the hand's form of this code carries a list of u16 (section 1.2)
+        fields["values"] = _u16_list(data)[0]
+    head = cmd.verb if direction == REQUEST else "->"
+    error = f"{cmd.name} {direction}: expected {expected}, got {len(data)}"
+    return fields, f"{head} unexpected data {_hex(data) or '(none)'}", [error], []
+
+
+def _compile(cmd: Command, direction: str, layout: Layout) -> Callable[[bytes, int], Decoded]:
+    """Turn a layout into a decode function (data, device) -> Decoded.
+
+    What does not depend on the values is worked out here, once (the struct, the summary
+    labels, the ranges), so the decode of a reply that rarely repeats (a moving gripper's
+    position) stays cheap.
+    """
+    if callable(layout):
+        return partial(layout, cmd, direction)
+    st = struct.Struct("<" + "".join(f.fmt for f in layout))
+    expected = _words(st.size)
+    head = cmd.verb if direction == REQUEST else "->"
+    # per field: key, key of its millimetre twin or None, range (unbounded if none), label,
+    # unit as a suffix
+    plan = [
+        (
+            f.key,
+            f.key + "_mm" if f.unit == "mm" else None,
+            f.lo if f.lo is not None else -1,
+            f.hi if f.hi is not None else 1 << 32,
+            f.label,
+            f" {f.unit}" if f.unit and f.unit != "mm" else "",
+        )
+        for f in layout
+    ]
+
+    def decode(data: bytes, device: int) -> Decoded:
+        if len(data) != st.size:
+            return _mismatch(cmd, direction, expected, data)
+        fields: dict[str, Any] = {}
+        parts = [head]
+        warnings: list[str] = []
+        for (key, mm_key, lo, hi, label, suffix), v in zip(plan, st.unpack(data), strict=False):
+            fields[key] = v
+            if mm_key is None:
+                parts.append(f"{label}={v}{suffix}")
+            else:
+                fields[mm_key] = _mm(v)
+                parts.append(f"{label}={v} ({_mm_text(v)} mm)")
+            if not lo <= v <= hi:
+                warnings.append(f"{label} out of range ({lo}-{hi}): {v}")
+        return fields, " ".join(parts), [], warnings
+
+    return decode
+
+
+# -- the payloads a field list cannot describe ---------------------------------------------
+
+
+def _status(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+    """The one status byte of a write/action response: 0x01 ok, 0x55 failure."""
+    if len(data) != 1:
+        return _mismatch(cmd, direction, "1 data byte (status)", data)
+    b = data[0]
+    if b == 0x01:
+        return {"status": "ok"}, "-> ok", [], []
+    if b == 0x55:
+        warning = "write failure status 0x55 (the host should resend)"
+        return {"status": "failure"}, "-> FAILED (0x55)", [], [warning]
+    warning = f"unknown status byte 0x{b:02X} (0x01 is ok, 0x55 failure)"
+    return {"status": f"unknown 0x{b:02X}"}, f"-> unknown status 0x{b:02X}", [], [warning]
+
+
+def _set_id(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+    """New ID: one byte per the manual, a u16 LE in one client's code (section 4)."""
+    if len(data) == 1:
+        new_id, width = data[0], 1
+    elif len(data) == 2:
+        new_id, width = data[0] | data[1] << 8, 2
+    else:
+        return _mismatch(cmd, direction, "1 or 2 data bytes", data)
+    warnings = []
+    lo, hi = _ID_RANGE
+    if not lo <= new_id <= hi:
+        warnings.append(f"new_id out of range ({lo}-{hi}): {new_id}")
+    if device == BROADCAST:
+        warnings.append("set ID sent to broadcast: every gripper on the bus takes the new ID")
+    summary = f"set ID {device} -> {new_id}" + (" (2-byte value)" if width == 2 else "")
+    return {"new_id": new_id, "id_width": width}, summary, [], warnings
+
+
+def _run_state(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+    """0x41 reply: state u8, fault u8, temperature u8, position u16, force setting u16."""
+    if len(data) != _RUNSTATE.size:
+        return _mismatch(cmd, direction, _words(_RUNSTATE.size), data)
+    state, fault, temp, pos, force = _RUNSTATE.unpack(data)
+    text, mm = _STATE_TEXT[state], _mm(pos)
+    fields = {
+        "state": state,
+        "state_text": text,
+        "fault": fault,
+        "fault_text": _FAULT_WORDS[fault],
+        "temperature_c": temp,
+        "position": pos,
+        "position_mm": mm,
+        "force_setting_g": force,
+    }
+    faults = _FAULT_SUMMARY[fault]
+    summary = (
+        f"-> state={state} {text}, {faults}, {temp} °C, "
+        f"position={pos} ({_mm_text(pos)} mm), force setting={force} g"
+    )
+    warnings = []
+    if not 1 <= state <= 6:
+        warnings.append(f"state out of range (1-6): {state}")
+    if fault:
+        warnings.append(f"gripper reports fault: {faults}")
+    if not 0 <= pos <= 1000:
+        warnings.append(f"position out of range (0-1000): {pos}")
+    if not 50 <= force <= 1000:
+        warnings.append(f"force setting out of range (50-1000): {force}")
+    return fields, summary, [], warnings
+
+
+def _eg_state(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+    """0x14 reply: not documented. One client reads opening, force, threshold (section 4)."""
+    fields: dict[str, Any] = {"data": _hex(data)}
+    if len(data) != 6:
+        return fields, f"-> {_words(len(data))} {_hex(data)} (layout not documented)", [], []
+    opening, force, threshold = struct.unpack("<HHH", data)
+    fields["probable"] = {"opening": opening, "force": force, "force_threshold": threshold}
+    summary = (
+        f"-> {_hex(data)}, probable layout (unverified): "
+        f"opening={opening} ({_mm_text(opening)} mm) force={force} force threshold={threshold}"
+    )
+    return fields, summary, [], []
+
+
+def _u16_list(data: bytes) -> tuple[list[int], bytes]:
+    even = len(data) & ~1
+    return list(struct.unpack(f"<{even // 2}H", data[:even])), data[even:]
+
+
+def _hand_values(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+    """Hand-compatible codes: the gripper's payload lengths are unknown, so u16 values by LEN."""
+    head = cmd.verb if direction == REQUEST else "->"
+    if not data:
+        return {}, head, [], []
+    values, rest = _u16_list(data)
+    fields: dict[str, Any] = {"values": values}
+    summary = f"{head} values={','.join(map(str, values))}"
+    if rest:
+        fields["extra"] = _hex(rest)  # an odd byte left over
+        summary += f" extra={fields['extra']}"
+    return fields, summary, [], []
+
+
+def _hand_write_reply(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+    """A hand-compatible write is answered like any write (one status byte), if it is short."""
+    if len(data) == 1:
+        return _status(cmd, direction, data, device)
+    return _hand_values(cmd, direction, data, device)
+
+
+def _hand(code: int, name: str, verb: str, reply: CustomDecode | None = None) -> Command:
+    """A code accepted for compatibility with the vendor's dexterous hand (section 1.2)."""
+    return Command(code, name, f"{verb} (hand-compatible)", _hand_values, reply or _hand_values)
+
+
+SEEK_ALIAS = "CMD_MC_SET_DRVALL_SEEKANGLE_GYH"
+ACTPOS_ALIAS = "CMD_MC_READ_DRVALL_CURANGLE_GYH"
+
+COMMANDS: Final[dict[int, Command]] = {
+    c.code: c
+    for c in (
+        Command(0x01, "CMD_MC_PARA_SAVE", "save parameters"),
+        Command(0x04, "CMD_MC_PARA_ID_SET", "set ID", _set_id),
+        Command(0x10, "CMD_MC_MOVE_CATCH_XG", "catch", (SPEED, FORCE)),
+        Command(0x18, "CMD_MC_MOVE_CATCH2_XG", "continuous catch", (SPEED, FORCE)),
+        Command(0x11, "CMD_MC_MOVE_RELEASE", "release", (SPEED,)),
+        Command(0x54, "CMD_MC_SEEKPOS", "seek", (SEEK_POSITION,), alias=SEEK_ALIAS),
+        Command(0x16, "CMD_MC_MOVE_STOPHERE", "stop"),
+        Command(0x12, "CMD_MC_SET_EG_PARA", "set limits", (LIMIT_MAX, LIMIT_MIN)),
+        Command(0x13, "CMD_MC_READ_EG_PARA", "read limits", (), (LIMIT_MAX, LIMIT_MIN)),
+        Command(0xD9, "CMD_MC_READ_ACTPOS", "read position", (), (ACT_POSITION,), ACTPOS_ALIAS),
+        Command(0x14, "CMD_MC_READ_EG_STATE", "read state", (), _eg_state),
+        Command(0x41, "CMD_MC_READ_EG_RUNSTATE", "read run state", (), _run_state),
+        Command(0x17, "CMD_MC_ERROR_CLR", "clear faults"),
+        _hand(0x51, "CMD_MC_SET_DRVALL_SPEED", "set speed", _hand_write_reply),
+        _hand(0x52, "CMD_MC_SET_DRVALL_YBP_THRESHOLD", "set force threshold", _hand_write_reply),
+        _hand(0xD7, "CMD_MC_READ_DRVALL_SEEKGYHANGLE", "read target position"),
+        _hand(0xD2, "CMD_MC_READ_DRVALL_SPEED", "read speed"),
+        _hand(0xD3, "CMD_MC_READ_DRVALL_YBP_THRESHOLD", "read force threshold"),
+        _hand(0xDC, "CMD_MC_READ_HAND_STATUS", "read hand status"),
+    )
+}
+
+
+def _response_layout(cmd: Command) -> Layout:
+    # an empty response layout means the usual one status byte of a write/action
+    return cmd.response if cmd.response != () else _status
+
+
+# (direction, CMD) -> (name, hand alias, decode function), compiled once
+DecodeFn = Callable[[bytes, int], Decoded]
+_DISPATCH: Final[dict[tuple[str, int], tuple[str, str | None, DecodeFn]]] = {}
+for _cmd in COMMANDS.values():
+    _DISPATCH[REQUEST, _cmd.code] = (
+        _cmd.name, _cmd.alias, _compile(_cmd, REQUEST, _cmd.request)
+    )  # fmt: skip
+    _DISPATCH[RESPONSE, _cmd.code] = (
+        _cmd.name, _cmd.alias, _compile(_cmd, RESPONSE, _response_layout(_cmd))
+    )  # fmt: skip
+
+
+def _unknown(code: int, data: bytes) -> Decoded:
+    """A CMD in neither table: still a frame when SUM checks; show its bytes (section 1.2)."""
+    summary = f"unknown command 0x{code:02X}" + (f": {_hex(data)}" if data else "")
+    warning = f"unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)"
+    return {"data": _hex(data)}, summary, [], [warning]
+
+
+# -- the decode of one frame, memoised --------------------------------------------------------
+
+# (direction, device, code, name, fields, summary, errors, warnings, pair_key, expects, is_save)
+_Entry = tuple[
+    str | None, int | None, int | None, str | None, dict[str, Any], str,
+    tuple[str, ...], tuple[str, ...], tuple[Any, ...] | None, bool, bool,
+]  # fmt: skip
+
+_CACHE: dict[bytes, _Entry] = {}
+_CACHE_MAX: Final = 50_000  # cleared when full: a live bus repeats few frames, memory stays flat
+
+
+def _decode(raw: bytes) -> _Entry:
+    """Everything about a frame that depends only on its bytes."""
+    if len(raw) < 6 or raw[3] + 5 != len(raw) or raw[:2] not in (REQUEST_HEADER, RESPONSE_HEADER):
+        # the framer only hands over well-framed bytes; this guards direct callers
+        error = f"malformed frame: {len(raw)} bytes do not fit a header and its length byte"
+        return (None, None, None, None, {"data": _hex(raw)}, "malformed frame",
+                (error,), (), None, False, False)  # fmt: skip
+    direction = REQUEST if raw[0] == 0xEB else RESPONSE
+    device, code, data = raw[2], raw[4], raw[5:-1]
+    entry = _DISPATCH.get((direction, code))
+    if entry is None:
+        name, alias = f"UNKNOWN_0x{code:02X}", None
+        body, summary, errors, warnings = _unknown(code, data)
+    else:
+        name, alias, decode = entry
+        body, summary, errors, warnings = decode(data, device)
+    fields: dict[str, Any] = {"id": device, **body}
+    if alias is not None:
+        fields["alias"] = alias
+    expected, got = sum(raw[2:-1]) & 0xFF, raw[-1]
+    if expected != got:
+        errors = [f"checksum error: expected 0x{expected:02X}, got 0x{got:02X}", *errors]
+    if device == 0:
+        warnings = ["ID 0 is not a valid ID", *warnings]
+    elif device == BROADCAST and direction == RESPONSE:
+        warnings = ["response from broadcast ID 255 (broadcasts get no response)", *warnings]
+    return (
+        direction,
+        device,
+        code,
+        name,
+        fields,
+        summary,
+        tuple(errors),
+        tuple(warnings),
+        (device, code),
+        direction == REQUEST and device != BROADCAST,
+        direction == REQUEST and code == 0x01,
+    )
+
+
+# Records are built positionally: keyword construction of the 22-field dataclass costs 2.5x as
+# much, and it is the largest single cost per frame. Fail loudly if model.Record changes order.
+_RECORD_ORDER: Final = (
+    "t", "bus", "protocol", "kind", "length", "raw", "offset", "index", "direction", "device",
+    "code", "name", "fields", "errors", "warnings", "summary", "seq", "pair", "latency_ms",
+    "pair_key", "expects_response", "is_save",
+)  # fmt: skip
+if tuple(f.name for f in dataclass_fields(Record)) != _RECORD_ORDER:
+    raise RuntimeError("decoders.model.Record changed its field order; update eg2_serial.py")
+
+
+def _short_candidate(buf: bytearray, pos: int) -> int:
+    """frame_at for fewer than 4 bytes: 0 as soon as the header is wrong, else wait."""
+    return NEED_MORE if bytes(buf[pos : pos + 2]) in _HEADER_PREFIXES else 0
+
+
+class Eg2SerialDecoder(ByteStreamDecoder):
+    """Feed Chunks of an RS232 tap (either or both directions interleaved), get Records."""
+
+    protocol = EG2_SERIAL
+    max_frame = 255 + 5  # LEN is one byte
+
+    def __init__(self, bus: str = "serial") -> None:
+        super().__init__(bus)
+
+    def frame_at(self, buf: bytearray, pos: int, final: bool) -> int:
+        try:
+            b0, b1, size = buf[pos], buf[pos + 1], buf[pos + 3] + 5
+        except IndexError:  # fewer than 4 bytes: the length is not known yet
+            return _short_candidate(buf, pos)
+        if not ((b0 == 0xEB and b1 == 0x90) or (b0 == 0xEE and b1 == 0x16)):
+            return 0
+        if size == 5:  # LEN 0: no CMD, not a frame
+            return 0
+        end = pos + size - 1  # index of SUM
+        if end >= len(buf):
+            return NEED_MORE
+        if sum(buf[pos + 2 : end]) & 0xFF == buf[end]:
+            return size
+        return -size
+
+    def next_start(self, buf: bytearray, pos: int) -> int:
+        # fast path: back-to-back frames start right here
+        if pos + 1 < len(buf):
+            b0 = buf[pos]
+            if (b0 == 0xEB and buf[pos + 1] == 0x90) or (b0 == 0xEE and buf[pos + 1] == 0x16):
+                return pos
+        m = _HEADER_RE.search(buf, pos)
+        return m.start() if m is not None else len(buf)
+
+    def make_record(self, raw: bytes, offset: int, t: float | None, valid: bool) -> Record:
+        # valid is implied by raw (the checksum is part of it), so the cache key is raw alone
+        entry = _CACHE.get(raw)
+        if entry is None:
+            if len(_CACHE) >= _CACHE_MAX:
+                _CACHE.clear()
+            entry = _CACHE[raw] = _decode(raw)
+        direction, device, code, name, fields, summary, errors, warnings, key, expects, save = entry
+        # fresh error/warning lists: the pairing and lint stages append to them; fields is
+        # shared between records of equal bytes and must be treated as read-only
+        return Record(
+            t, self.bus, EG2_SERIAL, FRAME, len(raw), raw, offset, None, direction, device,
+            code, name, fields, list(errors), list(warnings), summary, -1, None, None,
+            key, expects, save,
+        )  # fmt: skip
+
+    def truncated_reason(self, raw: bytes) -> str:
+        if len(raw) < 4:
+            return f"truncated frame: stream ended {len(raw)} bytes in, before the length byte"
+        return (
+            f"truncated frame: LEN {raw[3]} needs {raw[3] + 5} bytes, stream ended after {len(raw)}"
+        )
