@@ -46,4 +46,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError) as exc:
         print(f"eg2scope: error: {exc}", file=sys.stderr)
         return 1
-

@@ -65,8 +65,10 @@ class SessionCounts:
     dropped: int = 0
 
     def line(self) -> str:
-        return (f"{self.items:,} chunks/frames captured, {self.records:,} records decoded, "
-                f"{self.errors:,} with errors, {self.dropped:,} dropped")  # fmt: skip
+        return (
+            f"{self.items:,} chunks/frames captured, {self.records:,} records decoded, "
+            f"{self.errors:,} with errors, {self.dropped:,} dropped"
+        )
 
 
 class LiveSession:
@@ -109,8 +111,15 @@ class LiveSession:
                     try:
                         tap.stop()
                     except Exception as exc:  # a failing close must not lose the recording
-                        self._event(SourceEvent(time.time(), tap.bus, WARNING,
-                                                f"error while closing: {exc}", "closed"))  # fmt: skip
+                        self._event(
+                            SourceEvent(
+                                time.time(),
+                                tap.bus,
+                                WARNING,
+                                f"error while closing: {exc}",
+                                "closed",
+                            )
+                        )
                 self._step(self.queue.get_batch(0.0, max_items=10**9), final=True)
                 for out in self.outputs:
                     out.close()
@@ -141,8 +150,15 @@ class LiveSession:
         drops = self.queue.new_drops()
         if drops:
             self.counts.dropped += drops
-            self._event(SourceEvent(time.time(), "*", WARNING,
-                                    f"consumer fell behind: dropped {drops} items", "drops"))  # fmt: skip
+            self._event(
+                SourceEvent(
+                    time.time(),
+                    "*",
+                    WARNING,
+                    f"consumer fell behind: dropped {drops} items",
+                    "drops",
+                )
+            )
         self._emit(items, records)
         for out in self.outputs:
             out.tick()

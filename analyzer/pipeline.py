@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 from decoders.eg2_can import Eg2CanDecoder
 from decoders.framing import ByteStreamDecoder
-from decoders.registry import STREAM_DECODERS, detect_protocol
 from decoders.lint import TimingLinter
 from decoders.model import EG2_SERIAL, CanFrame, Chunk, Record
 from decoders.pairing import Pairer
+from decoders.registry import STREAM_DECODERS, detect_protocol
 
 DETECT_BYTES = 4096  # bytes of a stream looked at before choosing its protocol
 
@@ -37,21 +37,34 @@ class Decoding:
     """Items in, Records out, in stream order. ``protocol`` None: detect per byte stream;
     ``per_bus`` fixes the protocol of named buses (the demo knows what each line speaks)."""
 
-    def __init__(self, protocol: str | None = None, per_bus: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        protocol: str | None = None,
+        per_bus: dict[str, str] | None = None,
+        positional_seq: bool = False,
+        start_offset: int = 0,
+        can_index: int = 0,
+    ) -> None:
+        """``positional_seq``: seq is each record's offset or CAN index (single-stream
+        captures); ``start_offset``/``can_index``: where the input starts in a larger capture
+        (the parallel decoder's parts)."""
         self.protocol = protocol
         self.per_bus = per_bus or {}
         self.linter = TimingLinter()
-        self.pairer = Pairer()
+        self.pairer = Pairer(positional=positional_seq)
+        self.start_offset = start_offset
+        self.can_index = can_index  # frame number in the input, across all CAN channels
         self._streams: dict[tuple[str, str], ByteStreamDecoder] = {}
         self._undetected: dict[tuple[str, str], list[Chunk]] = {}
         self._can: dict[str, Eg2CanDecoder] = {}
-        self._can_index: dict[str, int] = {}
         self.detected: dict[str, str] = {}  # bus -> protocol chosen by detection
 
     def feed(self, item: Item) -> list[Record]:
         payload = item.payload
         if isinstance(payload, CanFrame):
-            return self._post([self._decode_can(item.bus, payload)])
+            rec = self._decode_can(item.bus, payload)
+            self.linter.check(rec)
+            return self.pairer.push(rec)
         key = (item.bus, item.stream)
         dec = self._streams.get(key)
         if dec is None:
@@ -96,9 +109,8 @@ class Decoding:
         dec = self._can.get(bus)
         if dec is None:
             dec = self._can[bus] = Eg2CanDecoder(bus)
-            self._can_index[bus] = 0
-        index = self._can_index[bus]
-        self._can_index[bus] = index + 1
+        index = self.can_index
+        self.can_index = index + 1
         return dec.decode(frame, index)
 
     def _start_stream(self, key: tuple[str, str], chunk: Chunk) -> ByteStreamDecoder | None:
@@ -117,6 +129,7 @@ class Decoding:
 
     def _new_stream_decoder(self, key: tuple[str, str], protocol: str) -> ByteStreamDecoder:
         dec = STREAM_DECODERS[protocol](key[0])
+        dec.start_at(self.start_offset)
         self._streams[key] = dec
         self.detected.setdefault(key[0], protocol)
         return dec

@@ -15,7 +15,12 @@ from typing import Any
 from decoders.model import FRAME, GARBAGE, REQUEST, RESPONSE, TRUNCATED, Record
 
 _LOG_STEP = math.log(1.01)
-_NUMBER = re.compile(r"-?\d+(\.\d+)?")
+_NUMBER = re.compile(r"0x[0-9A-Fa-f]+|-?\d+(\.\d+)?")
+
+
+def unanswered(rec: Record) -> bool:
+    """The pairing stage flagged this request as never answered."""
+    return any(w.startswith("no response") for w in rec.warnings)
 
 
 class LatencyHistogram:
@@ -63,7 +68,7 @@ class Counts:
     def add(self, rec: Record) -> None:
         if rec.direction == REQUEST:
             self.requests += 1
-            if rec.expects_response and rec.pair is None:
+            if unanswered(rec):
                 self.unanswered += 1
         elif rec.direction == RESPONSE:
             self.responses += 1
@@ -86,8 +91,11 @@ class Counts:
 
 
 def warning_kind(text: str) -> str:
-    """Group warnings by their wording, with the numbers taken out."""
-    return _NUMBER.sub("N", text)
+    """Group errors and warnings by their wording: the words before any detail (':' or
+    '('), with numbers taken out ("speed out of range", "command N ms after a parameter
+    save")."""
+    head = re.split(r"[:(]", text, maxsplit=1)[0].strip()
+    return _NUMBER.sub("N", head or text)
 
 
 class CaptureStats:
@@ -122,7 +130,7 @@ class CaptureStats:
             if not rec.errors:
                 self.valid += 1
         for e in rec.errors:
-            self.errors[warning_kind(e.split(":")[0] if rec.kind == GARBAGE else e)] += 1
+            self.errors[warning_kind(e)] += 1
         for w in rec.warnings:
             self.warnings[warning_kind(w)] += 1
         if rec.device is None or rec.kind != FRAME:
@@ -137,7 +145,7 @@ class CaptureStats:
         if cmd is None:
             cmd = self.commands[cmd_key] = Counts()
         cmd.add(rec)
-        if rec.direction == REQUEST and rec.expects_response and rec.pair is None:
+        if rec.direction == REQUEST and unanswered(rec):
             self.unanswered_ids.setdefault((rec.bus, rec.protocol), set()).add(rec.device)
 
     def scans(self) -> list[str]:

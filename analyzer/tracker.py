@@ -13,6 +13,8 @@ from typing import Any
 from decoders.model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
 from decoders.registers import BY_NAME, fault_text, opening_mm, state_text
 
+from .stats import unanswered
+
 # register name -> DeviceState attribute
 REGISTER_FIELDS: dict[str, str] = {
     "CMD_OPENLEN_SET": "target_opening",
@@ -85,7 +87,7 @@ class Tracker:
             return st
         if rec.direction == REQUEST:
             st.last_command = rec.summary or rec.name
-            if any(w.startswith("no response") for w in rec.warnings):
+            if unanswered(rec):
                 st.unanswered += 1
         elif rec.direction == RESPONSE and rec.latency_ms is not None:
             st.latency_ms = rec.latency_ms
@@ -131,9 +133,13 @@ class Tracker:
         elif code == 0xD9 and "position" in f:
             st.opening = f["position"]
         elif code == 0x41:
-            for attr, key in (("state", "state"), ("fault", "fault"),
-                              ("temperature_c", "temperature_c"), ("opening", "position"),
-                              ("force_setting", "force_setting_g")):  # fmt: skip
+            for attr, key in (
+                ("state", "state"),
+                ("fault", "fault"),
+                ("temperature_c", "temperature_c"),
+                ("opening", "position"),
+                ("force_setting", "force_setting_g"),
+            ):
                 if key in f:
                     setattr(st, attr, f[key])
         elif code == 0x14 and isinstance(f.get("probable"), dict):

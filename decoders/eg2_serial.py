@@ -340,12 +340,12 @@ def _response_layout(cmd: Command) -> Layout:
 DecodeFn = Callable[[bytes, int], Decoded]
 _DISPATCH: Final[dict[tuple[str, int], tuple[str, str | None, DecodeFn]]] = {}
 for _cmd in COMMANDS.values():
-    _DISPATCH[REQUEST, _cmd.code] = (
-        _cmd.name, _cmd.alias, _compile(_cmd, REQUEST, _cmd.request)
-    )  # fmt: skip
+    _DISPATCH[REQUEST, _cmd.code] = (_cmd.name, _cmd.alias, _compile(_cmd, REQUEST, _cmd.request))
     _DISPATCH[RESPONSE, _cmd.code] = (
-        _cmd.name, _cmd.alias, _compile(_cmd, RESPONSE, _response_layout(_cmd))
-    )  # fmt: skip
+        _cmd.name,
+        _cmd.alias,
+        _compile(_cmd, RESPONSE, _response_layout(_cmd)),
+    )
 
 
 def _unknown(code: int, data: bytes) -> Decoded:
@@ -359,9 +359,18 @@ def _unknown(code: int, data: bytes) -> Decoded:
 
 # (direction, device, code, name, fields, summary, errors, warnings, pair_key, expects, is_save)
 _Entry = tuple[
-    str | None, int | None, int | None, str | None, dict[str, Any], str,
-    tuple[str, ...], tuple[str, ...], tuple[Any, ...] | None, bool, bool,
-]  # fmt: skip
+    str | None,
+    int | None,
+    int | None,
+    str | None,
+    dict[str, Any],
+    str,
+    tuple[str, ...],
+    tuple[str, ...],
+    tuple[Any, ...] | None,
+    bool,
+    bool,
+]
 
 _CACHE: dict[bytes, _Entry] = {}
 _CACHE_MAX: Final = 50_000  # cleared when full: a live bus repeats few frames, memory stays flat
@@ -372,8 +381,19 @@ def _decode(raw: bytes) -> _Entry:
     if len(raw) < 6 or raw[3] + 5 != len(raw) or raw[:2] not in (REQUEST_HEADER, RESPONSE_HEADER):
         # the framer only hands over well-framed bytes; this guards direct callers
         error = f"malformed frame: {len(raw)} bytes do not fit a header and its length byte"
-        return (None, None, None, None, {"data": _hex(raw)}, "malformed frame",
-                (error,), (), None, False, False)  # fmt: skip
+        return (
+            None,
+            None,
+            None,
+            None,
+            {"data": _hex(raw)},
+            "malformed frame",
+            (error,),
+            (),
+            None,
+            False,
+            False,
+        )
     direction = REQUEST if raw[0] == 0xEB else RESPONSE
     device, code, data = raw[2], raw[4], raw[5:-1]
     entry = _DISPATCH.get((direction, code))
@@ -411,10 +431,29 @@ def _decode(raw: bytes) -> _Entry:
 # Records are built positionally: keyword construction of the 22-field dataclass costs 2.5x as
 # much, and it is the largest single cost per frame. Fail loudly if model.Record changes order.
 _RECORD_ORDER: Final = (
-    "t", "bus", "protocol", "kind", "length", "raw", "offset", "index", "direction", "device",
-    "code", "name", "fields", "errors", "warnings", "summary", "seq", "pair", "latency_ms",
-    "pair_key", "expects_response", "is_save",
-)  # fmt: skip
+    "t",
+    "bus",
+    "protocol",
+    "kind",
+    "length",
+    "raw",
+    "offset",
+    "index",
+    "direction",
+    "device",
+    "code",
+    "name",
+    "fields",
+    "errors",
+    "warnings",
+    "summary",
+    "seq",
+    "pair",
+    "latency_ms",
+    "pair_key",
+    "expects_response",
+    "is_save",
+)
 if tuple(f.name for f in dataclass_fields(Record)) != _RECORD_ORDER:
     raise RuntimeError("decoders.model.Record changed its field order; update eg2_serial.py")
 
@@ -469,10 +508,29 @@ class Eg2SerialDecoder(ByteStreamDecoder):
         # fresh error/warning lists: the pairing and lint stages append to them; fields is
         # shared between records of equal bytes and must be treated as read-only
         return Record(
-            t, self.bus, EG2_SERIAL, FRAME, len(raw), raw, offset, None, direction, device,
-            code, name, fields, list(errors), list(warnings), summary, -1, None, None,
-            key, expects, save,
-        )  # fmt: skip
+            t,
+            self.bus,
+            EG2_SERIAL,
+            FRAME,
+            len(raw),
+            raw,
+            offset,
+            None,
+            direction,
+            device,
+            code,
+            name,
+            fields,
+            list(errors),
+            list(warnings),
+            summary,
+            -1,
+            None,
+            None,
+            key,
+            expects,
+            save,
+        )
 
     def truncated_reason(self, raw: bytes) -> str:
         if len(raw) < 4:

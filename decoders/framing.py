@@ -65,6 +65,12 @@ class ByteStreamDecoder:
 
     # -- the shared machinery ---------------------------------------------------------------
 
+    def start_at(self, offset: int) -> None:
+        """Number this stream's bytes from ``offset`` (when decoding part of a capture)."""
+        if self._buf or self._base:
+            raise RuntimeError("start_at() must come before the first feed()")
+        self._base = offset
+
     def feed(self, chunk: Chunk) -> list[Record]:
         if chunk.direction is not None:
             self.direction_hint = chunk.direction
@@ -153,9 +159,7 @@ class ByteStreamDecoder:
             self._flush_garbage(out, pos)
             out.append(self._frame(buf, pos, length, False))
             pos += length
-        if final:
-            self._flush_garbage(out, pos)
-        elif self._garbage_at is not None and pos - self._garbage_at >= MAX_GARBAGE:
+        if final or (self._garbage_at is not None and pos - self._garbage_at >= MAX_GARBAGE):
             self._flush_garbage(out, pos)
         # keep only undecided bytes (and an open garbage run's start)
         keep_from = pos if self._garbage_at is None else self._garbage_at
@@ -219,7 +223,9 @@ class ByteStreamDecoder:
 
     def _frame(self, buf: bytearray, pos: int, length: int, valid: bool) -> Record:
         offset = self._base + pos
-        return self.make_record(bytes(buf[pos : pos + length]), offset, self._time_of(offset), valid)
+        return self.make_record(
+            bytes(buf[pos : pos + length]), offset, self._time_of(offset), valid
+        )
 
     def _truncated(self, raw: bytes, pos: int) -> Record:
         offset = self._base + pos

@@ -7,7 +7,15 @@ capture without timing) does not see. So a frame is found from its bytes: the fu
 shape the bus expects first (a request is pending: response first), and the CRC decides. A
 frame-shaped candidate with a bad CRC is reported as a frame only where it is plausible as one
 (the stream ends right after it, a timing gap follows it, or a valid frame starts right after
-it); otherwise its first byte is garbage and the search goes on one byte later.
+it); otherwise its first byte is garbage and the search goes on one byte later. Timing gaps
+only ever help; nothing needs them.
+
+CRC-16 collides structurally between readings one or two bytes apart (a good frame followed by
+00 is a good frame one byte longer; one frame in 256 has a good prefix one byte shorter), so a
+reading within two bytes of the chosen one is checked too, and when both hold, what the
+readings say and what follows them settles it (``ModbusRtuDecoder._decide``). That is why a
+read request of 1024-1279 (01 03 04 ..) waits for the next byte before it is decided, unless
+the source knows the direction.
 
 Direction. The bus is half duplex: requests and responses alternate. The shape decides for
 reads (8 bytes: request; 5 + 2N: response), write multiple (9 + 2N: request; 8: response) and
@@ -15,12 +23,14 @@ exceptions; a write single (request and response identical) is the response of t
 request it echoes, else a request. A direction the source knows (``direction_hint``) wins
 where the shape cannot decide.
 
-Registers are named through ``registers.by_modbus`` in both numberings (1010, or 10 as some
-hosts send it, section 4). A read response is named from its pending request; one without a
-known request shows its values by index.
+Registers are named from ``registers`` in both numberings (1010, or 10 as some hosts send it,
+section 4; the first register's numbering, as ``registers.by_modbus`` resolves it, holds for a
+whole range). A read response is named from its pending request; one without a known request
+shows its values by index.
 
 Speed: decoded frames are memoised by (bytes, pending request, direction hint), so a polling
-loop costs a dictionary lookup and a Record per frame after the first few cycles.
+loop costs a dictionary lookup and a Record per frame once values repeat; register values are
+memoised per register, so a response with new values costs little more.
 """
 
 from __future__ import annotations
@@ -33,9 +43,31 @@ import crcmod.predefined
 
 from .framing import NEED_MORE, ByteStreamDecoder
 from .model import FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
-from .registers import BY_NUMBER, FIRST, LAST, SAVE_REGISTERS, Register, undocumented
+from .registers import (
+    BY_NUMBER,
+    FIRST,
+    LAST,
+    SAVE_REGISTERS,
+    Register,
+    by_modbus,
+    undocumented,
+)
 
 crc16: Final = crcmod.predefined.mkCrcFun("modbus")  # CRC-16/MODBUS (C extension)
+
+
+def _raw_crc() -> tuple[Any, Any]:
+    """crcmod's C function and table, to skip its Python wrapper on the hot path."""
+    try:
+        init, table, fun = crc16.__defaults__  # type: ignore[attr-defined]
+        if init == 0xFFFF and fun(b"123456789", 0xFFFF, table) == 0x4B37:
+            return fun, table
+    except (AttributeError, TypeError, ValueError):
+        pass
+    return (lambda data, init, table: crc16(data)), None
+
+
+_crc, _TABLE = _raw_crc()
 
 CRC_SWAPPED: Final = "CRC byte order swapped (high byte first)"
 NO_REQUEST: Final = "read response without a known request: registers unknown"
@@ -140,7 +172,7 @@ CRC_BAD, CRC_OK, CRC_SWAPPED_ORDER = 0, 1, 2
 
 def crc_state(buf: bytes | bytearray, pos: int, end: int) -> int:
     """CRC_OK, CRC_SWAPPED_ORDER or CRC_BAD for the frame buf[pos:end]."""
-    c = crc16(buf[pos : end - 2])
+    c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
     got = buf[end - 2] | buf[end - 1] << 8
     if got == c:
         return CRC_OK
@@ -204,10 +236,12 @@ class _Plan:
         "cells",
         "count",
         "extra",
+        "items",
         "name",
         "names",
         "read_only",
         "regs",
+        "response_fields",
         "save_names",
         "short",
         "start",
@@ -217,19 +251,29 @@ class _Plan:
     )
 
     def __init__(self, wire_start: int, count: int) -> None:
-        # by_modbus's rule: 1-65 is the short numbering (10 = 1010), everything else as sent
-        self.short = short = 1 <= wire_start <= LAST - 1000
+        # the numbering is the first register's (10 = 1010), as registers.by_modbus says
+        first_lookup = by_modbus(wire_start)
+        self.short = short = first_lookup is not None and first_lookup.short
         self.start = start = wire_start + 1000 if short else wire_start
         self.count = count
         # the fields every frame over these registers carries
         self.extra: dict[str, Any] = {"start": start, "count": count}
         if short:
             self.extra.update(numbering="short", address=wire_start)
+        # a read response's fields, in order; slave and values filled in per frame
+        self.response_fields: dict[str, Any] = {
+            "slave": None,
+            "function": READ_HOLDING,
+            "byte_count": 2 * count,
+            **self.extra,
+            "values": None,
+        }
         warnings: list[str] = []
-        listed = min(count, 125)
+        listed = min(count, 127)  # the most registers a byte count can carry
         self.regs = regs = tuple(_register(start + i) for i in range(listed))
         self.names = [r.name for r in regs]
         self.cells = tuple(_cell(r.number) for r in regs)
+        self.items = tuple(zip(self.names, self.cells, regs, strict=True))
         self.unpack = struct.Struct(f">{listed}H").unpack_from
         if count == 0:
             self.name: str | None = None
@@ -276,7 +320,7 @@ class _Plan:
         values: dict[str, int] = {}
         texts: list[str] = []
         warns: list[str] = []
-        for reg, name, cell, w in zip(self.regs, self.names, self.cells, words, strict=False):
+        for (name, cell, reg), w in zip(self.items, words):  # noqa: B905 (hot loop)
             v = cell.get(w)
             if v is None:
                 v = _fill(cell, reg, w)
@@ -404,12 +448,8 @@ def decode(
             p = plan(pending[2], pending[3])
             values, texts, range_warnings = p.values(raw, 3, n - 2)
             slave = raw[0]
-            fields: dict[str, Any] = {
-                "slave": slave,
-                "function": READ_HOLDING,
-                "byte_count": raw[2],
-            }
-            fields.update(p.extra)
+            fields = p.response_fields.copy()
+            fields["slave"] = slave
             fields["values"] = values
             warnings = p.warnings + tuple(range_warnings) if range_warnings else p.warnings
             pair_key = (slave, READ_HOLDING)
@@ -436,6 +476,12 @@ def _decode(raw: bytes, pending: Pending | None, hint: str | None, crc: int | No
         errors.append(f"frame too short ({n} bytes)")
         short: dict[str, Any] = {"slave": raw[0] if raw else None}
         return (None, None, short, "", tuple(errors), (), None, False, False, None)
+    kind = KIND[raw[1]]
+    if not kind or n not in candidates(raw, 0, n, kind, False):
+        what = FUNCTION_TEXT.get(raw[1] & 0x7F, f"function 0x{raw[1]:02X}") if kind else ""
+        errors.append(f"{n} bytes are no Modbus frame shape ({what or f'code 0x{raw[1]:02X}'})")
+        shapeless: dict[str, Any] = {"slave": raw[0], "function": raw[1] & 0x7F}
+        return (None, None, shapeless, "", tuple(errors), (), None, False, False, None)
     if crc is None:
         crc = crc_state(raw, 0, n)
     valid = crc != CRC_BAD
@@ -449,7 +495,6 @@ def _decode(raw: bytes, pending: Pending | None, hint: str | None, crc: int | No
     slave, fc = raw[0], raw[1]
     direction = _direction(raw, pending, hint)
     fields: dict[str, Any] = {"slave": slave, "function": fc & 0x7F}
-    kind = KIND[fc]
     func = fc & 0x7F
     if kind and kind != _EXC and fc not in EG2_FUNCTIONS:
         warnings.append(
@@ -459,7 +504,8 @@ def _decode(raw: bytes, pending: Pending | None, hint: str | None, crc: int | No
         warnings.append("response from address 0 (broadcast requests get no response)")
     # a response is checked against the request it answers
     if direction == RESPONSE:
-        req = pending if pending is not None and pending[:2] == (slave, func) else None
+        answers = pending is not None and pending[0] == slave and pending[1] == func
+        req = pending if answers else None
     else:
         req = None
 
@@ -661,7 +707,10 @@ def _write_multiple(
     warnings += range_warnings
     if p.read_only is not None:
         warnings.append(p.read_only)
-    save = any(values.get(name) == 1 for name in p.save_names)
+    save = False
+    for name in p.save_names:
+        if values.get(name) == 1:
+            save = True
     fields["values"] = values
     noun = "register" if count == 1 else "registers"
     return p.name, f"write {count} {noun} from {p.start}: {texts}", save
@@ -718,49 +767,80 @@ class ModbusRtuDecoder(ByteStreamDecoder):
 
     def frame_at(self, buf: bytearray, pos: int, final: bool) -> int:
         n = len(buf)
-        slave = buf[pos]
-        if slave == NO_ADDRESS:
+        if buf[pos] == NO_ADDRESS:
             return 0
         if pos + 1 >= n:
             return NEED_MORE
         fc = buf[pos + 1]
         kind = KIND[fc]
-        if not kind:
-            return 0
-        hint = self.direction_hint
-        if hint is None:
-            p = self._pending
-            resp_first = p is not None and p[0] == slave
-        else:
-            resp_first = hint == RESPONSE
-        # the candidates, as candidates() gives them (inlined: this runs once per frame)
-        if kind == _READ:
-            other = _read_response_len(fc, buf[pos + 2]) if pos + 2 < n else -1
-            first, second = (other, 8) if resp_first else (8, other)
-        elif kind == _MULTI:
-            if pos + 6 < n:
-                other = _write_request_len(fc, buf[pos + 4] << 8 | buf[pos + 5], buf[pos + 6])
-            else:
-                other = -1
-            first, second = (8, other) if resp_first else (other, 8)
-        else:
-            other = 0
-        if not other or other == 8:  # one shape only (or both shapes of one length)
-            first, second = (5 if kind == _EXC else 8), 0
-        # the common case: the expected shape checks and no other reading is close enough to
-        # it to collide (see _decide); a known direction settles the reading by itself
-        if first > 0 and (
-            second == 0 or hint is not None or (second > 0 and abs(second - first) > CLOSE)
-        ):
+        if kind in (_SINGLE, _EXC):  # one shape, either direction
+            first = 8 if kind == _SINGLE else 5
             end = pos + first
             if end <= n:
-                c = crc16(buf[pos : end - 2])
+                c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
                 got = buf[end - 2] | buf[end - 1] << 8
                 if got == c:
                     return first
                 if got == ((c >> 8) | (c & 0xFF) << 8):
                     self._swapped = (self._base + pos, first)  # for make_record
                     return first
+            return self._decide(buf, pos, n, final, [first], False)
+        if not kind:
+            return 0
+        hint = self.direction_hint
+        if hint is None:
+            p = self._pending
+            resp_first = p is not None and p[0] == buf[pos]
+        else:
+            resp_first = hint == RESPONSE
+        # the two candidates, preferred first, as candidates() orders them (inlined: this
+        # runs once per frame); second == 0: none, -1: its length is not known yet
+        if kind == _READ:
+            if pos + 2 < n:
+                bc = buf[pos + 2]
+                other = 0 if bc == 0 or (fc >= READ_HOLDING and bc & 1) or bc == 3 else 5 + bc
+            else:
+                other = -1
+            if resp_first and other:
+                first, second = other, 8
+            else:
+                first, second = 8, other
+        else:
+            if pos + 6 < n:
+                other = _write_request_len(fc, buf[pos + 4] << 8 | buf[pos + 5], buf[pos + 6])
+            else:
+                other = -1
+            if resp_first or not other:
+                first, second = 8, other
+            else:
+                first, second = other, 8
+        # the common case: the expected shape checks, and no other reading is close enough
+        # to it to collide (see _decide) or that reading fails its CRC; a known direction
+        # settles the reading by itself
+        end = pos + first
+        if first > 0 and end <= n:
+            c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
+            got = buf[end - 2] | buf[end - 1] << 8
+            if got == c or got == ((c >> 8) | (c & 0xFF) << 8):
+                d = second - first
+                if second > 0 and hint is None and -CLOSE <= d <= CLOSE:
+                    # a close reading: does it hold too? (then _decide settles it)
+                    if d > 0 and got == c:
+                        # exact shortcut: this frame's CRC residue is 0, so a reading d bytes
+                        # longer holds exactly when the d bytes after it are 00
+                        if end + d > n:
+                            if not final:
+                                return NEED_MORE
+                        elif not buf[end] and (d == 1 or not buf[end + 1]):
+                            return self._decide(buf, pos, n, final, [first, second], True)
+                    elif pos + second > n:
+                        if not final:
+                            return NEED_MORE
+                    elif crc_state(buf, pos, pos + second):
+                        return self._decide(buf, pos, n, final, [first, second], True)
+                if got != c:
+                    self._swapped = (self._base + pos, first)  # for make_record
+                return first
         cands = [first] if second == 0 else [first, second]
         return self._decide(buf, pos, n, final, cands, hint is None)
 
@@ -920,8 +1000,8 @@ class ModbusRtuDecoder(ByteStreamDecoder):
             raw[1],
             name,
             fields,
-            list(errors),
-            list(warnings),
+            list(errors) if errors else [],  # never shared: the lint stage appends
+            list(warnings) if warnings else [],
             summary,
             -1,
             None,

@@ -29,33 +29,46 @@ class Pairer:
         timeout_s: float = 0.5,
         save_timeout_s: float = 2.0,
         max_held: int = 10_000,
+        positional: bool = False,
     ) -> None:
         self.timeout_s = timeout_s  # response time-out (clients use 20-30 ms; be generous)
         self.save_timeout_s = save_timeout_s  # a save pauses the gripper ~850 ms
         self.max_held = max_held
+        # positional: seq is the record's place in its input (offset, or CAN frame index), so
+        # a capture decoded in parallel parts numbers its records the same as in one piece
+        self.positional = positional
         self._held: deque[Record] = deque()
         self._pending: dict[tuple[Any, ...], Record] = {}
+        self._waiting: set[int] = set()  # id() of the pending requests
+        self._next_expiry = float("inf")  # earliest stream time a pending request times out
         self._seq = 0
 
     def push(self, rec: Record) -> list[Record]:
-        rec.seq = self._seq
-        self._seq += 1
-        if self._pending and rec.t is not None:
-            self._expire(rec.t)
+        if self.positional:
+            rec.seq = rec.offset if rec.offset is not None else (rec.index or 0)
+        else:
+            rec.seq = self._seq
+            self._seq += 1
+        t = rec.t
+        if t is not None and t > self._next_expiry:
+            self._expire(t)
         # a frame that fails its checksum cannot be trusted to say who it is for
-        if rec.kind == FRAME and rec.pair_key is not None and not rec.errors:
+        if rec.pair_key is not None and rec.kind == FRAME and not rec.errors:
             if rec.direction == REQUEST:
                 self._request(rec)
             elif rec.direction == RESPONSE:
                 self._response(rec)
+        held = self._held
         if not self._pending:
-            if not self._held:
+            if not held:
                 return [rec]
-            self._held.append(rec)
-            out = list(self._held)
-            self._held.clear()
+            held.append(rec)
+            out = list(held)
+            held.clear()
             return out
-        self._held.append(rec)
+        held.append(rec)
+        if id(held[0]) in self._waiting:
+            return [] if len(held) <= self.max_held else self._release()
         return self._release()
 
     def push_many(self, records: Iterable[Record]) -> list[Record]:
@@ -73,9 +86,8 @@ class Pairer:
 
     def flush(self) -> list[Record]:
         """End of stream: every request still waiting was never answered."""
-        for req in list(self._pending.values()):
-            self._unanswered(req, "no response before the end of the capture")
-        self._pending.clear()
+        for key, req in list(self._pending.items()):
+            self._drop(key, req, "no response before the end of the capture")
         out = list(self._held)
         self._held.clear()
         return out
@@ -90,20 +102,25 @@ class Pairer:
         if rec.protocol in ONE_OUTSTANDING:
             for key, old in list(self._pending.items()):
                 if key[0] == rec.bus and key[1] == rec.protocol:
-                    self._unanswered(old, "no response before the next request")
-                    del self._pending[key]
+                    self._drop(key, old, "no response before the next request")
         else:
-            same = self._pending.pop(self._key(rec), None)
+            key = self._key(rec)
+            same = self._pending.get(key)
             if same is not None:
-                self._unanswered(same, "no response before the next request with the same ID")
+                self._drop(key, same, "no response before the next request with the same ID")
         if rec.expects_response:
             self._pending[self._key(rec)] = rec
+            self._waiting.add(id(rec))
+            if rec.t is not None:
+                limit = self.save_timeout_s if rec.is_save else self.timeout_s
+                self._next_expiry = min(self._next_expiry, rec.t + limit)
 
     def _response(self, rec: Record) -> None:
         req = self._pending.pop(self._key(rec), None)
         if req is None:
             rec.warnings.append("response without a request")
             return
+        self._waiting.discard(id(req))
         req.pair = rec.seq
         rec.pair = req.seq
         if req.t is not None and rec.t is not None:
@@ -111,21 +128,26 @@ class Pairer:
             req.latency_ms = rec.latency_ms = latency
 
     def _expire(self, now: float) -> None:
+        nxt = float("inf")
         for key, req in list(self._pending.items()):
             if req.t is None:
                 continue
             limit = self.save_timeout_s if req.is_save else self.timeout_s
             if now - req.t > limit:
-                self._unanswered(req, f"no response within {limit * 1000:.0f} ms")
-                del self._pending[key]
+                self._drop(key, req, f"no response within {limit * 1000:.0f} ms")
+            else:
+                nxt = min(nxt, req.t + limit)
+        self._next_expiry = nxt
 
-    @staticmethod
-    def _unanswered(req: Record, why: str) -> None:
+    def _drop(self, key: tuple[Any, ...], req: Record, why: str) -> None:
+        """A pending request will not be answered: say so on it and stop waiting."""
         req.warnings.append(why)
+        del self._pending[key]
+        self._waiting.discard(id(req))
 
     def _release(self) -> list[Record]:
         held = self._held
-        waiting = {id(r) for r in self._pending.values()}
+        waiting = self._waiting
         out: list[Record] = []
         while held and id(held[0]) not in waiting:
             out.append(held.popleft())
@@ -134,7 +156,6 @@ class Pairer:
             head = held[0]
             for key, req in list(self._pending.items()):
                 if req is head:
-                    self._unanswered(req, "no response within the pairing window")
-                    del self._pending[key]
+                    self._drop(key, req, "no response within the pairing window")
             out += self._release()
         return out

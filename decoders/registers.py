@@ -75,7 +75,8 @@ class Register:
         return f"{self.key} out of range ({self.lo}-{self.hi}): {value}"
 
     def describe(self, value: int) -> str:
-        """``target_opening=500 (35.0 mm)``, ``temperature_c=37 °C``, ``state=1 (fully open, idle)``."""
+        """``target_opening=500 (35.0 mm)``, ``temperature_c=37 °C``, ``state=1 (fully open,
+        idle)``."""
         text = f"{self.key}={value}"
         if self.unit == "mm":
             return f"{text} ({opening_mm(value)} mm)"
@@ -122,7 +123,13 @@ SAVE_REGISTERS = frozenset({1001, 1002})  # writes of 1 here make the gripper pa
 def undocumented(number: int) -> Register:
     """A register inside the map's span that the manual does not describe (flagged)."""
     return Register(
-        number, f"REG_{number}", f"reg_{number}", "?", None, None, documented=False,
+        number,
+        f"REG_{number}",
+        f"reg_{number}",
+        "?",
+        None,
+        None,
+        documented=False,
         meaning=f"undocumented register {number}",
     )
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from .eg2_serial import Eg2SerialDecoder
 from .framing import ByteStreamDecoder
-from .model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Chunk
 from .modbus_rtu import ModbusRtuDecoder
+from .model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Chunk
 
 STREAM_DECODERS: dict[str, type[ByteStreamDecoder]] = {
     EG2_SERIAL: Eg2SerialDecoder,

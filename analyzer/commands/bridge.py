@@ -25,8 +25,13 @@ def add_subparser(sub: Any) -> None:
     parser.add_argument("host_port", metavar="HOST_PORT", help="port the host controller is on")
     parser.add_argument("device_port", metavar="DEVICE_PORT", help="port the gripper is on")
     parser.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    parser.add_argument("--protocol", "-p", default="auto", metavar="NAME",
-                        help="serial, modbus or auto (default: detected)")  # fmt: skip
+    parser.add_argument(
+        "--protocol",
+        "-p",
+        default="auto",
+        metavar="NAME",
+        help="serial, modbus or auto (default: detected)",
+    )
     parser.add_argument("--bus", metavar="NAME", help="bus name in records")
     parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
     add_session_arguments(parser, record_required=False)
@@ -34,6 +39,5 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    tap = SerialBridge(serial_bus_name(args), args.host_port, args.device_port,
-                       baudrate=args.baud)  # fmt: skip
+    tap = SerialBridge(serial_bus_name(args), args.host_port, args.device_port, baudrate=args.baud)
     return run_session(args, [tap], show=args.format, status=sys.stderr.isatty())

@@ -24,27 +24,46 @@ def add_subparser(sub: Any) -> None:
         epilog="example: eg2scope demo --duration 10 -o demo.mcap",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--buses", default=",".join(BUSES), metavar="LIST",
-                        help="which buses to simulate, comma separated (default: serial,modbus,can)")  # fmt: skip
-    parser.add_argument("--noise", type=float, default=0.01, metavar="P",
-                        help="probability of a corrupted, garbled or dropped response (default 0.01)")  # fmt: skip
+    add_demo_arguments(parser)
     parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
     add_session_arguments(parser, record_required=False)
     parser.set_defaults(func=run, protocol="auto")
 
 
+def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("demo (simulated grippers)")
+    group.add_argument(
+        "--buses",
+        default=",".join(BUSES),
+        metavar="LIST",
+        help="buses to simulate, comma separated (default: serial,modbus,can)",
+    )
+    group.add_argument(
+        "--noise",
+        type=float,
+        default=0.01,
+        metavar="P",
+        help="probability of a corrupted, garbled or dropped response (default 0.01)",
+    )
+
+
 def run_demo(args: argparse.Namespace, show: str | None) -> int:
-    buses = tuple(b.strip() for b in getattr(args, "buses", ",".join(BUSES)).split(",") if b)
-    noise = getattr(args, "noise", 0.01)
-    with DemoRig(buses, noise=noise) as rig:
+    buses = tuple(b.strip() for b in args.buses.split(",") if b.strip())
+    with DemoRig(buses, noise=args.noise) as rig:
         print(
             "eg2scope demo: simulated grippers 1 and 2 on "
             + ", ".join(f"{t.bus} ({type(t).__name__})" for t in rig.taps)
             + "; Ctrl-C to stop",
             file=sys.stderr,
         )
-        return run_session(args, rig.taps, show=show, status=show is None and sys.stderr.isatty(),
-                           per_bus=rig.protocols, on_start=rig.run_hosts)  # fmt: skip
+        return run_session(
+            args,
+            rig.taps,
+            show=show,
+            status=show is None and sys.stderr.isatty(),
+            per_bus=rig.protocols,
+            on_start=rig.run_hosts,
+        )
 
 
 def run(args: argparse.Namespace) -> int:

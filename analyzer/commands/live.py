@@ -32,8 +32,13 @@ def add_subparser(sub: Any) -> None:
     )
     add_source_arguments(parser)
     add_session_arguments(parser, record_required=False)
-    parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text",
-                        help="stdout format (default text)")  # fmt: skip
+    parser.add_argument(
+        "--format",
+        "-f",
+        choices=("text", "jsonl"),
+        default="text",
+        help="stdout format (default text)",
+    )
     parser.set_defaults(func=run)
 
 

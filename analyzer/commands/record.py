@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from .demo import add_demo_arguments, run_demo
 from .livesource import add_source_arguments, open_taps
 from .session import add_session_arguments, run_session
 
@@ -30,8 +31,12 @@ def add_subparser(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_source_arguments(parser)
-    parser.add_argument("--demo", action="store_true",
-                        help="record the built-in demo (simulated grippers on all three buses)")  # fmt: skip
+    parser.add_argument(
+        "--demo",
+        action="store_true",
+        help="record the built-in demo (simulated grippers on all three buses)",
+    )
+    add_demo_arguments(parser)
     add_session_arguments(parser, record_required=True)
     parser.add_argument("--show", action="store_true", help="also print the decoded text")
     parser.set_defaults(func=run)
@@ -39,8 +44,6 @@ def add_subparser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.demo:
-        from .demo import run_demo
-
         return run_demo(args, show="text" if args.show else None)
     show = "text" if args.show else None
     return run_session(args, open_taps(args), show=show, status=sys.stderr.isatty())

@@ -19,14 +19,27 @@ from ..sources.live import Tap
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
-    parser.add_argument("--output", "-o", metavar="RUN.mcap", required=record_required,
-                        help="record raw input, decoded records, device state and events to "
-                        "this MCAP file")  # fmt: skip
-    parser.add_argument("--duration", type=float, metavar="S",
-                        help="stop after S seconds (default: run until Ctrl-C)")  # fmt: skip
-    parser.add_argument("--queue-size", type=int, default=200_000, metavar="N",
-                        help="items buffered between capture and decoding before drops are "
-                        "counted (default 200000)")  # fmt: skip
+    parser.add_argument(
+        "--output",
+        "-o",
+        metavar="RUN.mcap",
+        required=record_required,
+        help="record raw input, decoded records, device state and events to this MCAP file",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="stop after S seconds (default: run until Ctrl-C)",
+    )
+    parser.add_argument(
+        "--queue-size",
+        type=int,
+        default=200_000,
+        metavar="N",
+        help="items buffered between capture and decoding before drops are "
+        "counted (default 200000)",
+    )
 
 
 class StatusLine(OutputBase):
@@ -58,10 +71,17 @@ def metadata(args: argparse.Namespace, taps: list[Tap]) -> dict[str, Any]:
         "tool": "eg2scope",
         "version": __version__,
         "command": " ".join(sys.argv),
-        "sources": [{"bus": t.bus, "type": type(t).__name__, "passive": t.passive,
-                     **t.settings} for t in taps],  # fmt: skip
-        "passive": ("yes" if all(t.passive == "yes" for t in taps)
-                    else "no" if any(t.passive == "no" for t in taps) else "unknown"),  # fmt: skip
+        "sources": [
+            {"bus": t.bus, "type": type(t).__name__, "passive": t.passive, **t.settings}
+            for t in taps
+        ],
+        "passive": (
+            "yes"
+            if all(t.passive == "yes" for t in taps)
+            else "no"
+            if any(t.passive == "no" for t in taps)
+            else "unknown"
+        ),
     }
 
 
@@ -89,8 +109,9 @@ def run_session(
             raise ValueError(f"recordings are MCAP files: name the output *.mcap, not {path}")
         recorder = McapRecorder(path, metadata=metadata(args, taps))
         outputs.append(McapOutput(recorder))
-    session = LiveSession(taps, outputs, protocol=protocol, queue_size=args.queue_size,
-                          per_bus=per_bus)  # fmt: skip
+    session = LiveSession(
+        taps, outputs, protocol=protocol, queue_size=args.queue_size, per_bus=per_bus
+    )
     if status and show is None:
         outputs.append(StatusLine(session, f"recording {args.output}"))
     counts: SessionCounts = session.run(duration=args.duration, on_start=on_start)

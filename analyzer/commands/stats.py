@@ -26,9 +26,12 @@ def add_subparser(sub: Any) -> None:
     )
     add_input_arguments(parser)
     parser.add_argument(
-        "--format", "-f", choices=("text", "json"), default="text", help="text tables "
-        "(default) or one JSON object"
-    )  # fmt: skip
+        "--format",
+        "-f",
+        choices=("text", "json"),
+        default="text",
+        help="text tables (default) or one JSON object",
+    )
     parser.set_defaults(func=run)
 
 
@@ -45,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "json":
         sys.stdout.buffer.write(orjson.dumps(data, option=orjson.OPT_INDENT_2) + b"\n")
         return 0
-    console = Console(highlight=False)
+    # a pipe or file gets the whole table, not one squeezed to 80 columns
+    console = Console(highlight=False, width=None if sys.stdout.isatty() else 200)
     console.print(
         f"[bold]{args.file}[/]: {data['records']:,} records, {data['frames']:,} frames "
         f"({data['valid_frames']:,} valid), {data['garbage_bytes']:,} garbage bytes, "
@@ -58,19 +62,25 @@ def run(args: argparse.Namespace) -> int:
     ):
         table = Table(title=title, title_justify="left")
         for col in ("bus", "protocol", "device", *([key] if key else [])):
-            table.add_column(col)
+            table.add_column(col, no_wrap=True)
         for col in ("requests", "responses", "unanswered", "errors", "warnings"):
             table.add_column(col, justify="right")
         for col in ("p50 ms", "p95 ms", "max ms"):
             table.add_column(col, justify="right")
         for row in rows:
             table.add_row(
-                row["bus"], row["protocol"], str(row["device"]),
+                row["bus"],
+                row["protocol"],
+                str(row["device"]),
                 *([row[key]] if key else []),
-                *(str(row[c]) for c in ("requests", "responses", "unanswered", "errors",
-                                        "warnings")),
-                _ms(row["p50_ms"]), _ms(row["p95_ms"]), _ms(row["max_ms"]),
-            )  # fmt: skip
+                *(
+                    str(row[c])
+                    for c in ("requests", "responses", "unanswered", "errors", "warnings")
+                ),
+                _ms(row["p50_ms"]),
+                _ms(row["p95_ms"]),
+                _ms(row["max_ms"]),
+            )
         console.print(table)
     for title, counts in (("Errors", data["errors"]), ("Warnings", data["warnings"])):
         if counts:

@@ -37,8 +37,9 @@ class DemoRig:
     def __init__(self, buses: tuple[str, ...] = BUSES, noise: float = 0.0, seed: int = 1) -> None:
         unknown = set(buses) - set(BUSES)
         if unknown:
-            raise ValueError(f"unknown demo bus {', '.join(sorted(unknown))}; choose from "
-                             f"{', '.join(BUSES)}")  # fmt: skip
+            raise ValueError(
+                f"unknown demo bus {', '.join(sorted(unknown))}; choose from {', '.join(BUSES)}"
+            )
         self.buses = buses
         self.noise = noise
         self.seed = seed
@@ -54,25 +55,40 @@ class DemoRig:
     @staticmethod
     def _models() -> dict[int, GripperModel]:
         now = time.monotonic()
-        return {1: GripperModel(1, now=now, object_width=420.0),
-                2: GripperModel(2, now=now, object_width=250.0)}  # fmt: skip
+        return {
+            1: GripperModel(1, now=now, object_width=420.0),
+            2: GripperModel(2, now=now, object_width=250.0),
+        }
 
     def start(self) -> DemoRig:
-        noise = {"corrupt": self.noise, "garbage": self.noise / 2, "drop": self.noise / 2}
+        corrupt, garbage, drop = self.noise, self.noise / 2, self.noise / 2
         for bus in self.buses:
             name = BUS_NAMES[bus]
             result = self.results[name] = HostResult()
             quirks = HostQuirks(short_registers=bus == "modbus", continuous=bus == "can")
             if bus == "can":
-                server: Any = CanGripperServer(self._models(), channel=self.can_channel,
-                                               seed=self.seed, **noise)  # fmt: skip
+                server: Any = CanGripperServer(
+                    self._models(),
+                    channel=self.can_channel,
+                    seed=self.seed,
+                    corrupt=corrupt,
+                    garbage=garbage,
+                    drop=drop,
+                )
                 target: Any = self.can_channel
                 self.taps.append(CanTap(name, "virtual", self.can_channel))
             else:
                 line = PtyBus(["gripper", "host", "tap"])
                 self._ptybuses.append(line)
                 cls = SerialGripperServer if bus == "serial" else ModbusGripperServer
-                server = cls(line.path("gripper"), self._models(), seed=self.seed, **noise)
+                server = cls(
+                    line.path("gripper"),
+                    self._models(),
+                    seed=self.seed,
+                    corrupt=corrupt,
+                    garbage=garbage,
+                    drop=drop,
+                )
                 target = line.path("host")
                 self.taps.append(SerialTap(name, line.path("tap")))
                 self.protocols[name] = EG2_SERIAL if bus == "serial" else MODBUS_RTU

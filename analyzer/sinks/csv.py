@@ -10,16 +10,34 @@ import orjson
 from decoders.model import Record
 
 COLUMNS = (
-    "seq", "t", "bus", "protocol", "kind", "offset", "index", "length", "direction", "device",
-    "code", "name", "summary", "fields", "raw", "errors", "warnings", "pair", "latency_ms",
-)  # fmt: skip
+    "seq",
+    "t",
+    "bus",
+    "protocol",
+    "kind",
+    "offset",
+    "index",
+    "length",
+    "direction",
+    "device",
+    "code",
+    "name",
+    "summary",
+    "fields",
+    "raw",
+    "errors",
+    "warnings",
+    "pair",
+    "latency_ms",
+)
 
 
 class CsvSink:
-    def __init__(self, out: IO[str]) -> None:
+    def __init__(self, out: IO[str], header: bool = True) -> None:
         self.out = out
         self.writer = csv.writer(out)
-        self.writer.writerow(COLUMNS)
+        if header:
+            self.writer.writerow(COLUMNS)
 
     def write(self, records: list[Record]) -> None:
         rows = []

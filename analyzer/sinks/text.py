@@ -46,11 +46,15 @@ class TextFormatter:
     def format(self, rec: Record) -> str:
         arrow = ARROWS.get(rec.direction or "", "·")
         who = f"ID {rec.device}" if rec.device is not None else "-"
-        if rec.kind == FRAME:
-            name = rec.name or rec.protocol
-        else:
-            name = rec.kind.upper()
-        parts = [self.time_column(rec), f"{rec.bus:6}", arrow, f"{who:8}", f"{name:26}", rec.summary]
+        name = (rec.name or rec.protocol) if rec.kind == FRAME else rec.kind.upper()
+        parts = [
+            self.time_column(rec),
+            f"{rec.bus:6}",
+            arrow,
+            f"{who:8}",
+            f"{name:26}",
+            rec.summary,
+        ]
         if rec.latency_ms is not None and rec.direction == RESPONSE:
             parts.append(f"({rec.latency_ms:.2f} ms)")
         line = " ".join(parts)

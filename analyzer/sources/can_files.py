@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import binascii
 import gzip
+import io
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -138,11 +139,22 @@ class CandumpReader(_FileReaderBase):
     in ``bad_lines`` and listed in ``errors`` ("line N: cannot parse: ...") and skipped.
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(
+        self, path: str | os.PathLike[str], byte_range: tuple[int, int] | None = None
+    ) -> None:
+        """``byte_range``: read only the lines in [start, end) of an uncompressed file (the
+        bounds must fall on line starts): the parallel decoder's parts."""
         super().__init__(path)
         self.bad_lines = 0
         if _is_gzip(self.path):
+            if byte_range is not None:
+                raise ValueError("a byte range of a compressed candump log cannot be read")
             self._file = gzip.open(self.path, "rb")  # noqa: SIM115
+        elif byte_range is not None:
+            lo, hi = byte_range
+            with open(self.path, "rb") as f:
+                f.seek(lo)
+                self._file = io.BytesIO(f.read(hi - lo))
         else:
             self._file = open(self.path, "rb", buffering=READ_BUFFER)  # noqa: SIM115
 
@@ -154,16 +166,17 @@ class CandumpReader(_FileReaderBase):
         channels: dict[bytes, str] = {}
         frame_type = CanFrame
         lineno = 0
-        count = 0
+        skipped = 0  # blank, comment and bad lines
         try:
-            for line in f:
-                lineno += 1
+            for lineno, line in enumerate(f, 1):
                 # the fast path: "(stamp) channel ID#HEXDATA" with a 3- or 8-digit data frame
                 try:
                     parts = line.split()
-                    stamp, chan, body = parts[0], parts[1], parts[2]
-                    if len(parts) != 3 and (len(parts) != 4 or parts[3] not in _DIRECTIONS):
-                        raise ValueError
+                    if len(parts) != 3:
+                        if len(parts) != 4 or parts[3] not in _DIRECTIONS:
+                            raise ValueError
+                        del parts[3]
+                    stamp, chan, body = parts
                     ident, hexdata = body.split(b"#")
                     if stamp[0] != 0x28 or stamp[-1] != 0x29:  # "(" ... ")"
                         raise ValueError
@@ -176,32 +189,34 @@ class CandumpReader(_FileReaderBase):
                     k = len(ident)
                     n = len(data)
                     if k == 8 and 0 <= aid <= CAN_EFF_MASK and n <= 8:
-                        frame = frame_type(t, aid, data, True, False, False, False, n, channel)
-                    elif k == 3 and 0 <= aid <= 0x7FF and n <= 8:
-                        frame = frame_type(t, aid, data, False, False, False, False, n, channel)
-                    else:
-                        raise ValueError
+                        yield frame_type(t, aid, data, True, False, False, False, n, channel)
+                        continue
+                    if k == 3 and 0 <= aid <= 0x7FF and n <= 8:
+                        yield frame_type(t, aid, data, False, False, False, False, n, channel)
+                        continue
+                    raise ValueError
                 except (ValueError, IndexError):
-                    # everything else: remote, error, FD frames, DLC suffixes, R/T flags,
-                    # blank lines, comments and damage
-                    try:
-                        parsed = _parse_candump(line, channels)
-                    except (ValueError, IndexError) as exc:
-                        self.bad_lines += 1
-                        text = line.decode("ascii", "replace").strip()
-                        if len(text) > 80:
-                            text = text[:77] + "..."
-                        self._error(f"line {lineno}: cannot parse: {text!r} ({exc})")
-                        continue
-                    if parsed is None:
-                        continue
-                    frame = parsed
-                count += 1
-                yield frame
+                    pass
+                # everything else: remote, error, FD frames, DLC suffixes, blank lines,
+                # comments and damage
+                try:
+                    parsed = _parse_candump(line, channels)
+                except (ValueError, IndexError) as exc:
+                    skipped += 1
+                    self.bad_lines += 1
+                    text = line.decode("ascii", "replace").strip()
+                    if len(text) > 80:
+                        text = text[:77] + "..."
+                    self._error(f"line {lineno}: cannot parse: {text!r} ({exc})")
+                    continue
+                if parsed is None:
+                    skipped += 1
+                    continue
+                yield parsed
         except (OSError, EOFError) as exc:  # a cut or damaged .gz
             self._error(f"line {lineno + 1}: read error: {type(exc).__name__}: {exc}")
         finally:
-            self.frames = count
+            self.frames = lineno - skipped
 
 
 _HEX_DIGITS = frozenset(b"0123456789abcdefABCDEF")

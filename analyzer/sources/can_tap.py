@@ -241,7 +241,7 @@ class CanTap(Tap):
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
         self._out: TapQueue | None = None
-        self.is_open = False
+        self._capturing = False
 
     # -- passive state ---------------------------------------------------------------------
 
@@ -278,6 +278,10 @@ class CanTap(Tap):
     @property
     def running(self) -> bool:
         return self._out is not None
+
+    @property
+    def is_open(self) -> bool:
+        return self._capturing
 
     def start(self, out: TapQueue) -> None:
         if self._out is not None:
@@ -382,11 +386,11 @@ class CanTap(Tap):
                 if self.passive != before:
                     self._passive_event(out)
             ever_open = True
-            self.is_open = True
+            self._capturing = True
             while not stop.is_set() and listener.error is None:
                 wake.wait(0.5)
             error = listener.error
-            self.is_open = False
+            self._capturing = False
             listener.halted.set()
             try:
                 notifier.stop(timeout=JOIN_TIMEOUT)

@@ -29,6 +29,9 @@ class CaptureReader:
     """Base: a capture file opened for reading. Subclasses implement ``__iter__``."""
 
     kind = "bytes"  # or "can"
+    # one byte stream, or CAN frames numbered across the file: records can be numbered by
+    # their place in the input (offset / index), which parallel decoding relies on
+    single_stream = False
 
     def __init__(self, path: str | os.PathLike[str], bus: str | None = None) -> None:
         self.path = Path(path)
@@ -63,6 +66,8 @@ class CaptureReader:
 class RawBytesReader(CaptureReader):
     """A raw dump of a serial line: bytes only, no timing."""
 
+    single_stream = True
+
     def __iter__(self) -> Iterator[Item]:
         bus = self.bus or "serial"
         with self.path.open("rb") as f:
@@ -84,6 +89,7 @@ class CanLogReader(CaptureReader):
     """A CAN capture in any format ``can_files`` knows."""
 
     kind = "can"
+    single_stream = True
 
     def __init__(self, path: str | os.PathLike[str], bus: str | None = None) -> None:
         super().__init__(path, bus)
@@ -93,13 +99,14 @@ class CanLogReader(CaptureReader):
         reader = self._reader
         fixed = self.bus
         names: dict[str | None, str] = {}
-        count = 0
         size = max(self.size, 1)
-        for frame in reader:
-            name = fixed or names.get(frame.channel)
-            if name is None:
-                name = names[frame.channel] = can_bus_name(frame.channel)
-            count += 1
+        last_channel: str | None = None
+        name = fixed or can_bus_name(None)
+        for count, frame in enumerate(reader, 1):
+            channel = frame.channel
+            if channel != last_channel and not fixed:
+                last_channel = channel
+                name = names.get(channel) or names.setdefault(channel, can_bus_name(channel))
             if not count & 0x3FF:
                 self.position = min(size, _tell(reader, count, size))
             yield Item(name, frame)
@@ -135,7 +142,6 @@ def open_capture(path: str | os.PathLike[str], bus: str | None = None) -> Captur
     p = Path(path)
     opener = CAPTURE_READERS.get(p.suffix.lower(), RawBytesReader)
     return opener(p, bus)
-
 
 
 from . import mcap_reader  # noqa: E402, F401  (registers .mcap; imported last: it imports this module)

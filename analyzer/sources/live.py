@@ -31,8 +31,13 @@ class SourceEvent:
     kind: str = "info"  # "open", "passive", "lost", "reopened", "drops", "closed", "info"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"t": self.t, "bus": self.bus, "level": self.level, "kind": self.kind,
-                "message": self.message}  # fmt: skip
+        return {
+            "t": self.t,
+            "bus": self.bus,
+            "level": self.level,
+            "kind": self.kind,
+            "message": self.message,
+        }
 
 
 class TapQueue:
@@ -85,7 +90,10 @@ class Tap:
     passive: str = "unknown"
     settings: dict[str, Any] = field(default_factory=dict)
 
-    is_open: bool = True  # the tap is capturing now (taps that open asynchronously override)
+    @property
+    def is_open(self) -> bool:
+        """The tap is capturing now (taps that open their ports on a thread override this)."""
+        return True
 
     def start(self, out: TapQueue) -> None:
         raise NotImplementedError

@@ -174,8 +174,9 @@ class _Scan:
                 f.seek(ci.chunk_start_offset + 1 + 8)  # opcode and record length
                 chunk = Chunk.read(ReadDataStream(f))
                 msgs = _pick(breakup_chunk(chunk), ci.chunk_start_offset, channels)
-                ready = merge.add(ci.message_start_time, ci.message_end_time,
-                                  ci.chunk_start_offset, msgs)  # fmt: skip
+                ready = merge.add(
+                    ci.message_start_time, ci.message_end_time, ci.chunk_start_offset, msgs
+                )
                 done += ci.chunk_length
                 for m in ready:
                     self.count += 1
@@ -213,11 +214,16 @@ class _Scan:
                             channels[rec.id] = rec
                             if rec.topic.startswith(prefix):
                                 wanted[rec.id] = rec
-                    ready = merge.add(record.message_start_time, record.message_end_time,
-                                      good, _pick(parts, good, wanted))  # fmt: skip
+                    ready = merge.add(
+                        record.message_start_time,
+                        record.message_end_time,
+                        good,
+                        _pick(parts, good, wanted),
+                    )
                 elif isinstance(record, Message):  # an unchunked file
-                    ready = merge.add(record.log_time, record.log_time, good,
-                                      _pick([record], good, wanted))  # fmt: skip
+                    ready = merge.add(
+                        record.log_time, record.log_time, good, _pick([record], good, wanted)
+                    )
                 elif isinstance(record, Channel):
                     channels[record.id] = record
                     if record.topic.startswith(prefix):

@@ -249,7 +249,7 @@ class _SerialTapBase(Tap):
         return self._out is not None
 
     @property
-    def is_open(self) -> bool:  # type: ignore[override]
+    def is_open(self) -> bool:
         return bool(self._readers) and all(r.is_open for r in self._readers)
 
     def start(self, out: TapQueue) -> None:

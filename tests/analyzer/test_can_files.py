@@ -54,16 +54,32 @@ MESSAGES = [
 
 # what each format keeps: kinds of frame, timestamp precision, channel, remote DLC
 FORMATS: dict[str, dict[str, Any]] = {
-    ".log": {"kinds": {"data", "remote", "error", "fd"}, "t_abs": 1e-6, "channel": "can0",
-             "remote_dlc": False},
-    ".asc": {"kinds": {"data", "remote", "error", "fd"}, "t_abs": 1e-3, "channel": "0",
-             "remote_dlc": True},
-    ".blf": {"kinds": {"data", "remote", "error", "fd"}, "t_abs": 1e-6, "channel": "0",
-             "remote_dlc": True},
-    ".csv": {"kinds": {"data", "remote", "error", "fd"}, "t_abs": 1e-6, "channel": None,
-             "remote_dlc": True},
+    ".log": {
+        "kinds": {"data", "remote", "error", "fd"},
+        "t_abs": 1e-6,
+        "channel": "can0",
+        "remote_dlc": False,
+    },
+    ".asc": {
+        "kinds": {"data", "remote", "error", "fd"},
+        "t_abs": 1e-3,
+        "channel": "0",
+        "remote_dlc": True,
+    },
+    ".blf": {
+        "kinds": {"data", "remote", "error", "fd"},
+        "t_abs": 1e-6,
+        "channel": "0",
+        "remote_dlc": True,
+    },
+    ".csv": {
+        "kinds": {"data", "remote", "error", "fd"},
+        "t_abs": 1e-6,
+        "channel": None,
+        "remote_dlc": True,
+    },
     ".trc": {"kinds": {"data"}, "t_abs": 1e-6, "channel": "1", "remote_dlc": True},
-}  # fmt: skip
+}
 
 
 def _kind(msg: can.Message) -> str:

@@ -16,14 +16,26 @@ import pytest
 
 from analyzer.cli import main
 from decoders.build import can_id
-from decoders.model import CanFrame
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURES = ROOT / "captures"
 CONTRACT_KEYS = {
-    "t", "bus", "protocol", "kind", "offset", "index", "length", "direction", "device", "code",
-    "name", "fields", "raw", "errors", "warnings",
-}  # fmt: skip
+    "t",
+    "bus",
+    "protocol",
+    "kind",
+    "offset",
+    "index",
+    "length",
+    "direction",
+    "device",
+    "code",
+    "name",
+    "fields",
+    "raw",
+    "errors",
+    "warnings",
+}
 
 
 def run_cli(capsysbinary: pytest.CaptureFixture[bytes], *argv: str) -> tuple[int, str, str]:
@@ -47,7 +59,7 @@ def test_byte_captures_account_for_every_byte(capsysbinary, name: str, protocol:
     records = jsonl(capsysbinary, str(path))  # protocol detected from the bytes
     assert records, "no records"
     for rec in records:
-        assert CONTRACT_KEYS <= rec.keys()
+        assert rec.keys() >= CONTRACT_KEYS
         assert rec["protocol"] == protocol
     offset = 0
     for rec in records:
@@ -59,13 +71,20 @@ def test_byte_captures_account_for_every_byte(capsysbinary, name: str, protocol:
     frames = [r for r in records if r["kind"] == "frame"]
     assert any(r["errors"] for r in frames), "the sample's corrupt frame was not reported"
     assert any(r["kind"] == "garbage" for r in records)
+    # in a capture file a record's seq is its place in the input: here its byte offset
+    assert all(r["seq"] == r["offset"] for r in records)
+    by_seq = {r["seq"]: r for r in records}
     paired = [r for r in frames if r["direction"] == "response" and r["pair"] is not None]
-    assert paired and all(records[r["pair"]]["direction"] == "request" for r in paired)
+    assert paired
+    for resp in paired:
+        req = by_seq[resp["pair"]]
+        assert req["direction"] == "request" and req["pair"] == resp["seq"]
 
 
 def test_serial_sample_decodes_in_words(capsysbinary) -> None:
-    code, out, _ = run_cli(capsysbinary, "decode", str(CAPTURES / "serial_session.bin"),
-                           "--colour", "never")  # fmt: skip
+    code, out, _ = run_cli(
+        capsysbinary, "decode", str(CAPTURES / "serial_session.bin"), "--colour", "never"
+    )
     assert code == 0
     assert "CMD_MC_MOVE_CATCH_XG" in out and "speed=500" in out and "force=100 g" in out
     assert "checksum error: expected 0x" in out
@@ -90,15 +109,24 @@ def test_can_log_decodes_and_pairs(capsysbinary) -> None:
 
 def sample_can_frames() -> list[can.Message]:
     msgs = []
-    for i, (arb, data, ext) in enumerate([
-        (can_id(1, 1020, 1), bytes.fromhex("0000F401F401"), True),
-        (can_id(1, 1020, 1), b"\x06", True),
-        (can_id(0, 1120, 2), b"\x08", True),
-        (can_id(0, 1120, 2), bytes.fromhex("F300E80300002200"), True),
-        (0x123, b"\x01\x02", False),
-    ]):  # fmt: skip
-        msgs.append(can.Message(timestamp=1000.0 + i * 0.01, arbitration_id=arb, data=data,
-                                is_extended_id=ext, channel=0))  # fmt: skip
+    for i, (arb, data, ext) in enumerate(
+        [
+            (can_id(1, 1020, 1), bytes.fromhex("0000F401F401"), True),
+            (can_id(1, 1020, 1), b"\x06", True),
+            (can_id(0, 1120, 2), b"\x08", True),
+            (can_id(0, 1120, 2), bytes.fromhex("F300E80300002200"), True),
+            (0x123, b"\x01\x02", False),
+        ]
+    ):
+        msgs.append(
+            can.Message(
+                timestamp=1000.0 + i * 0.01,
+                arbitration_id=arb,
+                data=data,
+                is_extended_id=ext,
+                channel=0,
+            )
+        )
     return msgs
 
 
@@ -122,7 +150,9 @@ def test_python_can_formats_decode_alike(capsysbinary, tmp_path: Path, suffix: s
 
 
 def test_csv_output(capsysbinary) -> None:
-    code, out, _ = run_cli(capsysbinary, "decode", "-f", "csv", str(CAPTURES / "modbus_session.bin"))
+    code, out, _ = run_cli(
+        capsysbinary, "decode", "-f", "csv", str(CAPTURES / "modbus_session.bin")
+    )
     assert code == 0
     rows = list(csv.DictReader(io.StringIO(out)))
     assert rows[0]["protocol"] == "modbus-rtu"
@@ -146,8 +176,9 @@ def test_explicit_protocol_overrides_detection(capsysbinary) -> None:
 
 
 def test_stats(capsysbinary) -> None:
-    code, out, _ = run_cli(capsysbinary, "stats", "--format", "json",
-                           str(CAPTURES / "can_pick_place.log"))  # fmt: skip
+    code, out, _ = run_cli(
+        capsysbinary, "stats", "--format", "json", str(CAPTURES / "can_pick_place.log")
+    )
     assert code == 0
     data = json.loads(out)
     devices = {d["device"]: d for d in data["devices"]}
@@ -173,7 +204,10 @@ def test_id_scan_is_named(capsysbinary, tmp_path: Path) -> None:
     ("argv", "message"),
     [
         (["decode", "/nonexistent/file.log"], "capture file not found"),
-        (["decode", "--protocol", "zigbee", str(CAPTURES / "serial_session.bin")], "unknown protocol"),
+        (
+            ["decode", "--protocol", "zigbee", str(CAPTURES / "serial_session.bin")],
+            "unknown protocol",
+        ),
     ],
 )
 def test_clear_errors(capsysbinary, argv: list[str], message: str) -> None:
@@ -186,14 +220,17 @@ def test_truncated_blf_yields_frames_before_the_damage(capsysbinary, tmp_path: P
     path = tmp_path / "cut.blf"
     with can.Logger(str(path)) as writer:
         for i in range(3000):
-            writer.on_message_received(can.Message(timestamp=i * 0.001,
-                                                   arbitration_id=can_id(0, 1120, 1),
-                                                   data=b"\x08", channel=0))  # fmt: skip
+            writer.on_message_received(
+                can.Message(
+                    timestamp=i * 0.001, arbitration_id=can_id(0, 1120, 1), data=b"\x08", channel=0
+                )
+            )
     data = path.read_bytes()
     path.write_bytes(data[: len(data) * 2 // 3])
     code, out, err = run_cli(capsysbinary, "decode", "-f", "jsonl", str(path))
     assert code == 0
     assert 0 < len(out.splitlines()) < 3000
+    assert "truncated" in err or "damaged" in err or "error" in err
 
 
 def test_colour_follows_the_terminal_conventions(capsysbinary, monkeypatch) -> None:
@@ -215,8 +252,12 @@ def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "COLUMNS": "100"}
     proc = subprocess.run(
         [sys.executable, "-m", "analyzer", "decode", "-f", "jsonl", str(big)],
-        stdout=subprocess.DEVNULL, stderr=slave, env=env, timeout=120, check=True,
-    )  # fmt: skip
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+        env=env,
+        timeout=120,
+        check=True,
+    )
     os.close(slave)
     seen = b""
     try:
@@ -229,6 +270,10 @@ def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
     assert b"big.bin" in seen and b"records" in seen
     plain = subprocess.run(
         [sys.executable, "-m", "analyzer", "decode", "-f", "jsonl", str(big)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, timeout=120, check=True,
-    )  # fmt: skip
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=env,
+        timeout=120,
+        check=True,
+    )
     assert plain.stderr == b""

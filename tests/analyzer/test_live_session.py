@@ -8,6 +8,7 @@ import os
 import threading
 import time
 import tty
+import typing
 from pathlib import Path
 
 import can
@@ -43,12 +44,17 @@ def run_in_thread(session: LiveSession) -> threading.Thread:
 
 def serial_traffic() -> bytes:
     s = b.serial_frame
-    return b"".join([
-        s(1, 0x10, b.u16le(500, 100)), s(1, 0x10, b"\x01", response=True),
-        s(1, 0xD9), s(1, 0xD9, b.u16le(497), response=True),
-        b"\x00\x01\x02",
-        s(2, 0x41), s(2, 0x41, bytes((6, 0, 40)) + b.u16le(300, 100), response=True),
-    ])  # fmt: skip
+    return b"".join(
+        [
+            s(1, 0x10, b.u16le(500, 100)),
+            s(1, 0x10, b"\x01", response=True),
+            s(1, 0xD9),
+            s(1, 0xD9, b.u16le(497), response=True),
+            b"\x00\x01\x02",
+            s(2, 0x41),
+            s(2, 0x41, bytes((6, 0, 40)) + b.u16le(300, 100), response=True),
+        ]
+    )
 
 
 def test_serial_tap_decodes_live_and_records(tmp_path: Path) -> None:
@@ -58,8 +64,9 @@ def test_serial_tap_decodes_live_and_records(tmp_path: Path) -> None:
     out = io.StringIO()
     mcap_path = tmp_path / "run.mcap"
     recorder = McapRecorder(mcap_path, metadata={"test": True})
-    session = LiveSession([SerialTap("rs232", port)], [TextOutput(out, colour=False),
-                                                        McapOutput(recorder)])  # fmt: skip
+    session = LiveSession(
+        [SerialTap("rs232", port)], [TextOutput(out, colour=False), McapOutput(recorder)]
+    )
     thread = run_in_thread(session)
     data = serial_traffic()
     for i in range(0, len(data), 5):  # in bursts, as a USB adapter delivers them
@@ -100,8 +107,9 @@ def test_can_tap_on_virtual_bus_records_and_replays(tmp_path: Path) -> None:
     ]
     with can.Bus(interface="virtual", channel=channel) as sender:
         for f in frames:
-            sender.send(can.Message(arbitration_id=f.arbitration_id, data=f.data,
-                                    is_extended_id=True))  # fmt: skip
+            sender.send(
+                can.Message(arbitration_id=f.arbitration_id, data=f.data, is_extended_id=True)
+            )
             time.sleep(0.006)
     time.sleep(0.3)
     session.stop()
@@ -125,7 +133,7 @@ def test_drops_are_counted_and_reported() -> None:
     class Flood:
         bus = "flood"
         passive = "yes"
-        settings: dict = {}
+        settings: typing.ClassVar[dict] = {}
 
         def start(self, out: TapQueue) -> None:
             for _ in range(500):

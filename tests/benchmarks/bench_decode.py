@@ -100,8 +100,19 @@ def main() -> int:
     }
     tshark = shutil.which("tshark")
     if tshark:
-        cases["can (tshark)"] = [tshark, "-r", str(paths["pcap"]), "-T", "fields",
-                                 "-e", "can.id", "-e", "can.len", "-e", "data.data"]  # fmt: skip
+        cases["can (tshark)"] = [
+            tshark,
+            "-r",
+            str(paths["pcap"]),
+            "-T",
+            "fields",
+            "-e",
+            "can.id",
+            "-e",
+            "can.len",
+            "-e",
+            "data.data",
+        ]
     results: dict[str, tuple[float, float]] = {}
     for name, cmd in cases.items():
         walls, rss = [], []
@@ -112,8 +123,10 @@ def main() -> int:
         wall = statistics.median(walls)
         results[name] = (args.frames / wall, max(rss))
         runs = ", ".join(f"{w:.2f}" for w in walls)
-        print(f"{name:14} {args.frames / wall:>10,.0f} frames/s  (median of {args.runs}: "
-              f"{runs} s)  peak RSS {max(rss):.0f} MB")  # fmt: skip
+        print(
+            f"{name:14} {args.frames / wall:>10,.0f} frames/s  (median of {args.runs}: "
+            f"{runs} s)  peak RSS {max(rss):.0f} MB"
+        )
     ok = True
     for name in ("serial", "modbus", "can"):
         fps, mb = results[name]
@@ -122,8 +135,10 @@ def main() -> int:
             target = max(MUST_FPS, int(results["can (tshark)"][0]))
         verdict = "ok" if fps >= target and mb < MUST_MB else "BELOW TARGET"
         ok &= verdict == "ok"
-        print(f"  {name}: {fps:,.0f} frames/s vs must {target:,}; {mb:.0f} MB vs {MUST_MB} MB: "
-              f"{verdict}")  # fmt: skip
+        print(
+            f"  {name}: {fps:,.0f} frames/s vs must {target:,}; {mb:.0f} MB vs {MUST_MB} MB: "
+            f"{verdict}"
+        )
     if not tshark:
         print("  tshark not installed: CAN compared with the 150k frames/s figure only")
     return 0 if ok else 1

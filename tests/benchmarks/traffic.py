@@ -20,8 +20,12 @@ def serial_frames(n: int, seed: int = 1) -> Iterator[bytes]:
         kind = rng.random()
         if kind < 0.45:
             yield s(dev, 0x41)
-            yield s(dev, 0x41, bytes((rng.randint(1, 6), 0, rng.randint(30, 45))) +
-                    b.u16le(pos, 100), response=True)  # fmt: skip
+            yield s(
+                dev,
+                0x41,
+                bytes((rng.randint(1, 6), 0, rng.randint(30, 45))) + b.u16le(pos, 100),
+                response=True,
+            )
         elif kind < 0.8:
             yield s(dev, 0xD9)
             yield s(dev, 0xD9, b.u16le(pos), response=True)
@@ -42,8 +46,16 @@ def modbus_frames(n: int, seed: int = 2) -> Iterator[bytes]:
         kind = rng.random()
         if kind < 0.7:
             yield b.modbus_read_request(dev, 1061, 5)
-            yield b.modbus_read_response(dev, [rng.randint(0, 1000), rng.randint(-50, 400),
-                                               rng.randint(30, 45), 0, rng.randint(1, 6)])  # fmt: skip
+            yield b.modbus_read_response(
+                dev,
+                [
+                    rng.randint(0, 1000),
+                    rng.randint(-50, 400),
+                    rng.randint(30, 45),
+                    0,
+                    rng.randint(1, 6),
+                ],
+            )
         elif kind < 0.85:
             frame = b.modbus_write_single(dev, 1010, rng.randint(0, 1000))
             yield frame

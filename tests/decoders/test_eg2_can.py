@@ -73,15 +73,19 @@ def test_vectors_present() -> None:
     assert len(CAN_VECTORS) >= 3
 
 
+VECTOR_CASES = [(v, False) for v in CAN_VECTORS] + [
+    (v, True) for v in CAN_VECTORS if "alt_data_padded" in v
+]
+
+
 @needs_vectors
-@pytest.mark.parametrize("vec", CAN_VECTORS, ids=[v["meaning"] for v in CAN_VECTORS])
-@pytest.mark.parametrize("padded", [False, True], ids=["plain", "padded"])
+@pytest.mark.parametrize(
+    "vec,padded",
+    VECTOR_CASES,
+    ids=[v["meaning"] + (" (padded)" if p else "") for v, p in VECTOR_CASES],
+)
 def test_vector(vec: dict[str, Any], padded: bool) -> None:
-    data = vec["data"]
-    if padded:
-        if "alt_data_padded" not in vec:
-            pytest.skip("no padded form")
-        data = vec["alt_data_padded"]
+    data = vec["alt_data_padded"] if padded else vec["data"]
     aid = int(vec["id"], 16)
     dec = Eg2CanDecoder()
     req = dec.decode(frame(aid, data, 1.0), 0)
@@ -530,9 +534,15 @@ def test_write_range_warnings(address: int, raw: str, flagged: bool) -> None:
 
 @pytest.mark.parametrize(
     "address,raw,save",
-    [(1002, "01 00", True), (1004, "01 00", True), (1002, "00 00", False), (1006, "01 00", False),
-     (1000, "00 00 01 00", True), (1002, "00 00 01 00", True)],
-)  # fmt: skip
+    [
+        (1002, "01 00", True),
+        (1004, "01 00", True),
+        (1002, "00 00", False),
+        (1006, "01 00", False),
+        (1000, "00 00 01 00", True),
+        (1002, "00 00 01 00", True),
+    ],
+)
 def test_is_save(address: int, raw: str, save: bool) -> None:
     (rec,) = decode_all([frame(pack_id(1, address, 1), raw)])
     assert rec.is_save is save

@@ -9,14 +9,30 @@ from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
 from decoders.pairing import Pairer
 
 
-def rec(direction: str, device: int, t: float | None = None, code: int = 0x10,
-        protocol: str = EG2_SERIAL, bus: str = "serial", expects: bool = True,
-        save: bool = False) -> Record:  # fmt: skip
+def rec(
+    direction: str,
+    device: int,
+    t: float | None = None,
+    code: int = 0x10,
+    protocol: str = EG2_SERIAL,
+    bus: str = "serial",
+    expects: bool = True,
+    save: bool = False,
+) -> Record:
     return Record(
-        t=t, bus=bus, protocol=protocol, kind=FRAME, length=6, raw=b"", direction=direction,
-        device=device, code=code, pair_key=(device, code),
-        expects_response=expects and direction == REQUEST, is_save=save,
-    )  # fmt: skip
+        t=t,
+        bus=bus,
+        protocol=protocol,
+        kind=FRAME,
+        length=6,
+        raw=b"",
+        direction=direction,
+        device=device,
+        code=code,
+        pair_key=(device, code),
+        expects_response=expects and direction == REQUEST,
+        is_save=save,
+    )
 
 
 def run(records: list[Record], **kw: float) -> list[Record]:
@@ -80,8 +96,14 @@ def test_response_without_request() -> None:
 
 
 def test_can_pairs_per_identifier_with_several_outstanding() -> None:
-    a, b = rec(REQUEST, 1, protocol=EG2_CAN, bus="can0"), rec(REQUEST, 2, protocol=EG2_CAN, bus="can0")
-    rb, ra = rec(RESPONSE, 2, protocol=EG2_CAN, bus="can0"), rec(RESPONSE, 1, protocol=EG2_CAN, bus="can0")
+    a, b = (
+        rec(REQUEST, 1, protocol=EG2_CAN, bus="can0"),
+        rec(REQUEST, 2, protocol=EG2_CAN, bus="can0"),
+    )
+    rb, ra = (
+        rec(RESPONSE, 2, protocol=EG2_CAN, bus="can0"),
+        rec(RESPONSE, 1, protocol=EG2_CAN, bus="can0"),
+    )
     out = run([a, b, rb, ra])
     assert out == [a, b, rb, ra]
     assert a.pair == ra.seq and b.pair == rb.seq

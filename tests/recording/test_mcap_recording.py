@@ -30,8 +30,11 @@ from decoders import build as b
 from decoders.model import CanFrame, Chunk, Record
 
 T0 = 1_763_700_000.0
-META = {"sources": [{"bus": "can0", "interface": "socketcan", "bitrate": 500000}],
-        "passive": "yes", "note": "bench 3"}  # fmt: skip
+META = {
+    "sources": [{"bus": "can0", "interface": "socketcan", "bitrate": 500000}],
+    "passive": "yes",
+    "note": "bench 3",
+}
 
 
 def sample_items() -> list[Item]:
@@ -52,11 +55,21 @@ def sample_items() -> list[Item]:
 
 def record(seq: int, **kw: object) -> Record:
     base: dict[str, object] = dict(
-        t=T0 + seq / 1000, bus="can0", protocol="eg2-can", kind="frame", length=4,
-        raw=b"\x01\x02\x03\x04", index=seq, direction="request", device=1, code=1,
-        name="CMD_OPENLEN_SET", fields={"address": 0x10, "value": 500}, summary="set",
+        t=T0 + seq / 1000,
+        bus="can0",
+        protocol="eg2-can",
+        kind="frame",
+        length=4,
+        raw=b"\x01\x02\x03\x04",
+        index=seq,
+        direction="request",
+        device=1,
+        code=1,
+        name="CMD_OPENLEN_SET",
+        fields={"address": 0x10, "value": 500},
+        summary="set",
         seq=seq,
-    )  # fmt: skip
+    )
     base.update(kw)
     return Record(**base)  # type: ignore[arg-type]
 
@@ -83,10 +96,17 @@ def recording(tmp_path: Path) -> Path:
         rec.write_record(record(1, direction="response", errors=["bad CRC: expected 1234"]))
         rec.write_record(record(2, warnings=["no response within 50 ms"], device=None))
         ok = Record(
-            t=T0 + 0.01, bus="can0", protocol="eg2-can", kind="frame", length=2, raw=b"\x2c\x01",
-            direction="response", device=1, name="CMD_OPENLEN_ACT",
+            t=T0 + 0.01,
+            bus="can0",
+            protocol="eg2-can",
+            kind="frame",
+            length=2,
+            raw=b"\x2c\x01",
+            direction="response",
+            device=1,
+            name="CMD_OPENLEN_ACT",
             fields={"address": 0x46, "values": {"CMD_OPENLEN_ACT": 300}},
-        )  # fmt: skip
+        )
         state = tracker.update(ok)
         assert state is not None
         rec.write_state(state)
@@ -136,8 +156,12 @@ def test_raw_messages_match_items(recording: Path) -> None:
             assert log_time == int(p.t * 1e9)
         if isinstance(p, CanFrame):
             assert (msg["id"], msg["extended"], msg["remote"], msg["error"], msg["fd"]) == (
-                p.arbitration_id, p.is_extended, p.is_remote, p.is_error, p.is_fd,
-            )  # fmt: skip
+                p.arbitration_id,
+                p.is_extended,
+                p.is_remote,
+                p.is_error,
+                p.is_fd,
+            )
             assert msg["dlc"] == p.length and msg["channel"] == p.channel
         else:
             assert (msg["stream"], msg["direction"]) == (item.stream, p.direction)
@@ -146,10 +170,14 @@ def test_raw_messages_match_items(recording: Path) -> None:
 def test_decoded_state_and_event_messages(recording: Path) -> None:
     msgs = mcap_messages(recording)
     decoded = [m[5] for m in msgs if m[0] == "/decoded/can0"]
-    assert decoded == [orjson.loads(orjson.dumps(r.to_dict())) for r in
-                       (record(0), record(1, direction="response",
-                                          errors=["bad CRC: expected 1234"]),
-                        record(2, warnings=["no response within 50 ms"], device=None))]  # fmt: skip
+    assert decoded == [
+        orjson.loads(orjson.dumps(r.to_dict()))
+        for r in (
+            record(0),
+            record(1, direction="response", errors=["bad CRC: expected 1234"]),
+            record(2, warnings=["no response within 50 ms"], device=None),
+        )
+    ]
     states = [m for m in msgs if m[0] == "/state/can0/1"]
     assert len(states) == 2
     for *_, log_time, st in states:
@@ -219,9 +247,11 @@ def test_records_events_states_read_back(recording: Path) -> None:
     ]
     events = list(read_events(recording, errors))
     assert [(e.bus, e.level, e.kind) for e in events] == [
-        ("can0", ERROR, "decode"), ("can0", WARNING, "decode"), ("can0", WARNING, "drops"),
+        ("can0", ERROR, "decode"),
+        ("can0", WARNING, "decode"),
+        ("can0", WARNING, "drops"),
         ("ttyUSB0", INFO, "reopened"),
-    ]  # fmt: skip
+    ]
     assert events[2] == SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops")
     states = list(read_states(recording, errors))
     assert [s["opening"] for s in states] == [300, 300]
@@ -230,9 +260,15 @@ def test_records_events_states_read_back(recording: Path) -> None:
 
 def test_redecoding_a_recording_gives_the_same_records(tmp_path: Path) -> None:
     serial = b"".join(
-        [b.serial_frame(1, 0x41), b.serial_frame(1, 0x41, b"\x01\x00\x20\x2c\x01\x64\x00", True),
-         b"\x55\xaa", b.serial_frame(2, 0xD9), b.serial_frame(2, 0xD9, b"\x2c\x01", True)] * 30
-    )  # fmt: skip
+        [
+            b.serial_frame(1, 0x41),
+            b.serial_frame(1, 0x41, b"\x01\x00\x20\x2c\x01\x64\x00", True),
+            b"\x55\xaa",
+            b.serial_frame(2, 0xD9),
+            b.serial_frame(2, 0xD9, b"\x2c\x01", True),
+        ]
+        * 30
+    )
     items = [
         Item("ttyS0", Chunk(serial[i : i + 7], T0 + i * 1e-4)) for i in range(0, len(serial), 7)
     ]
@@ -411,10 +447,14 @@ def test_log_time_order_matches_the_mcap_library(tmp_path: Path) -> None:
     with path.open("rb") as f:
         reader = make_reader(f)
         assert len(reader.get_summary().chunk_indexes) > 20  # type: ignore[union-attr]
-        library = [(ch.topic, orjson.loads(m.data)["data"])
-                   for _s, ch, m in reader.iter_messages(log_time_order=True)]  # fmt: skip
-    ours = [("/raw/" + i.bus, base64.b64encode(i.payload.data).decode()) for i in
-            McapCaptureReader(path)]  # fmt: skip
+        library = [
+            (ch.topic, orjson.loads(m.data)["data"])
+            for _s, ch, m in reader.iter_messages(log_time_order=True)
+        ]
+    ours = [
+        ("/raw/" + i.bus, base64.b64encode(i.payload.data).decode())
+        for i in McapCaptureReader(path)
+    ]
     assert ours == library
     assert ours != [("/raw/" + i.bus, base64.b64encode(i.payload.data).decode()) for i in items]
     # recovered from a damaged copy: the same order, for what is left

@@ -97,5 +97,7 @@ def test_sigkilled_recorder_leaves_a_recoverable_file(tmp_path: Path) -> None:
             assert p.arbitration_id == 0x100 + n % 5
         else:
             assert isinstance(p, Chunk) and (item.bus, item.stream, p.direction) == (
-                "ttyUSB0", "tx", "request",
-            )  # fmt: skip
+                "ttyUSB0",
+                "tx",
+                "request",
+            )

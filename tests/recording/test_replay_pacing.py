@@ -25,8 +25,10 @@ class FakeClock:
 
 
 def items(times: list[float | None]) -> list[Item]:
-    return [Item("can0", CanFrame(t, 1)) if i % 2 else Item("s", Chunk(b"x", t))
-            for i, t in enumerate(times)]  # fmt: skip
+    return [
+        Item("can0", CanFrame(t, 1)) if i % 2 else Item("s", Chunk(b"x", t))
+        for i, t in enumerate(times)
+    ]
 
 
 def emitted_at(its: list[Item], speed: float | None, **kw: float) -> list[float]:
@@ -59,8 +61,11 @@ def test_untimed_items_and_clock_steps_back() -> None:
 
 def test_max_gap_skips_idle_time() -> None:
     assert emitted_at(items([0.0, 0.1, 3600.0, 3600.2]), 1.0, max_gap_s=1.0) == [
-        0.0, 0.1, 1.1, 1.3,
-    ]  # fmt: skip
+        0.0,
+        0.1,
+        1.1,
+        1.3,
+    ]
 
 
 def test_slow_consumer_is_not_slowed_further() -> None:
@@ -80,9 +85,18 @@ def test_real_clock_roughly() -> None:
 
 @pytest.mark.parametrize(
     ("text", "speed"),
-    [("max", None), ("inf", None), ("0", None), (None, None), ("1", 1.0), ("10", 10.0),
-     ("10x", 10.0), ("0.5", 0.5), (4, 4.0)],
-)  # fmt: skip
+    [
+        ("max", None),
+        ("inf", None),
+        ("0", None),
+        (None, None),
+        ("1", 1.0),
+        ("10", 10.0),
+        ("10x", 10.0),
+        ("0.5", 0.5),
+        (4, 4.0),
+    ],
+)
 def test_parse_speed(text: str | float | None, speed: float | None) -> None:
     assert parse_speed(text) == speed
 

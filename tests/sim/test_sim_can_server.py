@@ -181,8 +181,9 @@ def test_noise(channel: str, host: can.BusABC) -> None:
     with CanGripperServer([GripperModel(1)], channel=channel, corrupt=1.0, garbage=1.0):
         send(host, req.arbitration_id, req.data)
         got: list[Any] = answers(host)
-        kinds = ["error" if m.is_error_frame else "std" if not m.is_extended_id else "eg2"
-                 for m in got]  # fmt: skip
+        kinds = [
+            "error" if m.is_error_frame else "std" if not m.is_extended_id else "eg2" for m in got
+        ]
         assert kinds == ["std", "error", "eg2"]
         assert bytes(got[-1].data) == b"\x01\x00"
 

@@ -101,9 +101,8 @@ def test_short_register_numbers_are_the_same_registers(
         (lambda c: c.read_input_registers(1061, count=1, device_id=1), 1),  # function 04
         (lambda c: c.write_coil(1, True, device_id=1), 1),  # function 05
     ],
-    ids=["1013", "1060+7", "2000", "ro 1061", "1010=1001", "speed 5000", "max<min", "fc04",
-         "fc05"],
-)  # fmt: skip
+    ids=["1013", "1060+7", "2000", "ro 1061", "1010=1001", "speed 5000", "max<min", "fc04", "fc05"],
+)
 def test_exceptions(
     gripper: tuple[ModbusGripperServer, GripperModel],
     client: ModbusSerialClient,
