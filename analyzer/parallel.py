@@ -33,9 +33,12 @@ from .pipeline import Decoding, Item
 from .sources.can_files import CandumpReader, _is_gzip
 from .sources.capture import RawBytesReader, can_bus_name
 
-PART_BYTES = 8 << 20  # size of one part
-WARMUP = 1 << 20  # decoded before and after a part to rebuild the decoder state
-MIN_PARALLEL_BYTES = 3 * PART_BYTES  # smaller files are decoded in one piece
+# Part sizes and warm-ups per kind of input. A candump log carries time: its warm-up covers
+# the longest a request may wait for its answer (a save, 2 s) on a busy bus. A raw dump has
+# no timing, so pairing state lasts only until the next request: a short warm-up will do.
+PART_BYTES = {"candump": 6 << 20, "bytes": 1 << 20}
+WARMUP = {"candump": 1 << 20, "bytes": 64 << 10}
+MIN_PARALLEL_BYTES = {"candump": 8 << 20, "bytes": 2 << 20}  # smaller: one piece
 READ = 1 << 16
 
 
@@ -76,11 +79,12 @@ def splittable(path: Path, fmt: str, reader_kind: str) -> bool:
     """Worth and possible to split: large raw dumps and candump logs, JSONL or CSV out."""
     if fmt not in ("jsonl", "csv") or (os.cpu_count() or 1) < 2:
         return False
-    if path.stat().st_size < MIN_PARALLEL_BYTES:
+    if (
+        reader_kind not in MIN_PARALLEL_BYTES
+        or path.stat().st_size < MIN_PARALLEL_BYTES[reader_kind]
+    ):
         return False
-    if reader_kind == "candump":
-        return not _is_gzip(path)
-    return reader_kind == "bytes"
+    return reader_kind != "candump" or not _is_gzip(path)
 
 
 def _line_starts(path: Path, points: list[int]) -> list[int]:
@@ -118,12 +122,12 @@ def _frame_lines_before(path: Path, points: list[int]) -> list[int]:
 
 def plan(path: Path, kind: str, base: dict[str, Any]) -> list[Part]:
     size = path.stat().st_size
-    cuts = list(range(0, size, PART_BYTES))[1:]
+    cuts = list(range(0, size, PART_BYTES[kind]))[1:]
     if kind == "candump":
         cuts = _line_starts(path, cuts)
     bounds = [0, *sorted(set(c for c in cuts if 0 < c < size)), size]
-    warm = [max(0, lo - WARMUP) for lo in bounds[:-1]]
-    cool = [min(size, hi + WARMUP) for hi in bounds[1:]]
+    warm = [max(0, lo - WARMUP[kind]) for lo in bounds[:-1]]
+    cool = [min(size, hi + WARMUP[kind]) for hi in bounds[1:]]
     n = len(warm)
     if kind == "candump":
         warm = _line_starts(path, warm)

@@ -200,16 +200,7 @@ def _register(number: int) -> Register:
         return reg
     if FIRST <= number <= LAST:
         return undocumented(number)
-    return Register(
-        number,
-        f"REG_{number}",
-        f"reg_{number}",
-        "?",
-        None,
-        None,
-        documented=False,
-        meaning=f"register {number}, outside the EG2 register map",
-    )
+    return undocumented(number, f"register {number}, outside the EG2 register map")
 
 
 def _outside(reg: Register) -> bool:

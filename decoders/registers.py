@@ -120,8 +120,9 @@ FIRST, LAST = 1001, 1065
 SAVE_REGISTERS = frozenset({1001, 1002})  # writes of 1 here make the gripper pause ~850 ms
 
 
-def undocumented(number: int) -> Register:
-    """A register inside the map's span that the manual does not describe (flagged)."""
+def undocumented(number: int, meaning: str | None = None) -> Register:
+    """A placeholder for a register the manual does not describe (flagged): inside the map's
+    span by default, or anywhere else with its own ``meaning``."""
     return Register(
         number,
         f"REG_{number}",
@@ -130,7 +131,7 @@ def undocumented(number: int) -> Register:
         None,
         None,
         documented=False,
-        meaning=f"undocumented register {number}",
+        meaning=meaning or f"undocumented register {number}",
     )
 
 
