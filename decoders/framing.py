@@ -116,14 +116,27 @@ class ByteStreamDecoder:
         buf = self._buf
         n = len(buf)
         pos = 0
+        frame_at = self.frame_at
+        make_record = self.make_record
+        times = self._times
+        skips = type(self).next_start is not ByteStreamDecoder.next_start
         while pos < n:
-            start = self.next_start(buf, pos)
-            if start > pos:
-                self._garbage(out, pos, start)
-                pos = start
-                if pos >= n:
-                    break
-            r = self.frame_at(buf, pos, final)
+            if skips:
+                start = self.next_start(buf, pos)
+                if start > pos:
+                    self._garbage(out, pos, start)
+                    pos = start
+                    if pos >= n:
+                        break
+            r = frame_at(buf, pos, final)
+            if r > 0:  # the common case, inlined: a valid frame
+                if self._garbage_at is not None:
+                    self._flush_garbage(out, pos)
+                offset = self._base + pos
+                t = times[0][1] if len(times) == 1 else self._time_of(offset)
+                out.append(make_record(bytes(buf[pos : pos + r]), offset, t, True))
+                pos += r
+                continue
             if r == NEED_MORE:
                 if not final:
                     break

@@ -740,7 +740,7 @@ class ModbusRtuDecoder(ByteStreamDecoder):
     """Modbus RTU frames of one RS485 line, in stream order (feed Chunks, then finish)."""
 
     protocol = MODBUS_RTU
-    max_frame = 5 + 255
+    max_frame = 9 + 255  # a write-multiple request with a full byte count
 
     def __init__(self, bus: str = "rs485") -> None:
         super().__init__(bus)
@@ -749,6 +749,7 @@ class ModbusRtuDecoder(ByteStreamDecoder):
         # (offset, length) of the last frame frame_at found valid with its CRC bytes swapped;
         # a frame's CRC state is a property of its bytes, so this never goes stale
         self._swapped: tuple[int, int] | None = None
+        self._short_seen: set[int] = set()  # devices already said to use short numbers
 
     @property
     def pending(self) -> Pending | None:
@@ -977,6 +978,8 @@ class ModbusRtuDecoder(ByteStreamDecoder):
             e = memo[key] = decode(raw, self._pending, hint, crc)
         direction, name, fields, summary, errors, warnings, pair_key, expects, save, nxt = e
         self._pending = nxt
+        if warnings and "numbering" in fields:
+            warnings = self._short_numbering_once(raw[0], warnings)
         return Record(
             t,
             self.bus,
@@ -1001,6 +1004,19 @@ class ModbusRtuDecoder(ByteStreamDecoder):
             expects,
             save,
         )
+
+    def _short_numbering_once(self, slave: int, warnings: tuple[str, ...]) -> tuple[str, ...]:
+        """A host that leaves out the 1000 offset does it on every frame: say so on its first
+        frame per device; later frames keep ``numbering: "short"`` without the warning."""
+        if slave not in self._short_seen:
+            self._short_seen.add(slave)
+            return tuple(
+                w.replace("short register number", "this host uses short register number", 1)
+                if w.startswith("short register number")
+                else w
+                for w in warnings
+            )
+        return tuple(w for w in warnings if not w.startswith("short register number"))
 
     def truncated_reason(self, raw: bytes) -> str:
         n = len(raw)

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from protocol_vectors import load, needs_vectors
 
 from decoders import registers
 from decoders.eg2_can import (
@@ -24,17 +25,7 @@ from decoders.eg2_can import (
 from decoders.model import EG2_CAN, FOREIGN_CAN, FRAME, REQUEST, RESPONSE, CanFrame, Record
 
 ROOT = Path(__file__).resolve().parents[2]
-VECTORS = Path(__file__).resolve().parents[3] / "shared/protocol/vectors.json"
-
-
-def _vectors() -> list[dict[str, Any]]:
-    if not VECTORS.exists():
-        return []
-    return list(json.loads(VECTORS.read_text())["eg2_can"])
-
-
-CAN_VECTORS = _vectors()
-needs_vectors = pytest.mark.skipif(not VECTORS.exists(), reason=f"{VECTORS} is missing")
+CAN_VECTORS = load("eg2_can")
 
 
 def frame(aid: int, data: str | bytes, t: float | None = None, **kw: Any) -> CanFrame:

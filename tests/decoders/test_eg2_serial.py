@@ -5,28 +5,17 @@ from __future__ import annotations
 
 import json
 import random
-from pathlib import Path
 from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from protocol_vectors import VECTORS_PATH, params
 
 from decoders import eg2_serial
 from decoders.eg2_serial import COMMANDS, Eg2SerialDecoder, build_frame
 from decoders.framing import NEED_MORE
 from decoders.model import FRAME, GARBAGE, REQUEST, RESPONSE, TRUNCATED, Chunk, Record
-
-VECTORS_PATH = Path(__file__).parents[2].parent / "shared/protocol/vectors.json"
-
-
-def _vectors(key: str) -> list[Any]:
-    """vectors.json entries as pytest params, or one skipped param when the file is absent."""
-    if not VECTORS_PATH.exists():
-        reason = f"protocol vectors not found at {VECTORS_PATH}"
-        return [pytest.param(None, marks=pytest.mark.skip(reason=reason))]
-    entries = json.loads(VECTORS_PATH.read_text())[key]
-    return [pytest.param(e, id=e["meaning"]) for e in entries]
 
 
 def h(text: str) -> bytes:
@@ -108,7 +97,7 @@ def random_frames(rng: random.Random, n: int) -> list[bytes]:
 # -- the manual's worked frames -----------------------------------------------------------
 
 
-@pytest.mark.parametrize("vector", _vectors("eg2_serial"))
+@pytest.mark.parametrize("vector", params("eg2_serial"))
 @pytest.mark.parametrize("side", ["request", "response"])
 def test_vector(vector: dict[str, Any], side: str) -> None:
     code_text, short = vector["request_fields"]["cmd"].split()
@@ -161,7 +150,7 @@ def test_bad_vector_write_failure() -> None:
     assert r.warnings == ["write failure status 0x55 (the host should resend)"]
 
 
-@pytest.mark.parametrize("vector", _vectors("eg2_serial_bad"))
+@pytest.mark.parametrize("vector", params("eg2_serial_bad"))
 def test_bad_vectors_are_flagged(vector: dict[str, Any]) -> None:
     r = one(h(vector["bytes"]))
     assert r.kind == FRAME

@@ -8,12 +8,12 @@ from __future__ import annotations
 import json
 import random
 import struct
-from pathlib import Path
 from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from protocol_vectors import VECTORS_PATH, params
 from pymodbus.framer import FramerRTU
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
 from pymodbus.pdu import bit_message as bm
@@ -34,16 +34,6 @@ from decoders.modbus_rtu import (
     with_crc,
 )
 from decoders.model import FRAME, GARBAGE, MODBUS_RTU, REQUEST, RESPONSE, TRUNCATED, Chunk, Record
-
-VECTORS_PATH = Path(__file__).parents[2].parent / "shared/protocol/vectors.json"
-
-
-def _vectors(key: str) -> list[Any]:
-    if not VECTORS_PATH.exists():
-        reason = f"protocol vectors not found at {VECTORS_PATH}"
-        return [pytest.param(None, marks=pytest.mark.skip(reason=reason))]
-    entries = json.loads(VECTORS_PATH.read_text())[key]
-    return [pytest.param(i, e, id=e["meaning"]) for i, e in enumerate(entries)]
 
 
 def h(text: str) -> bytes:
@@ -197,7 +187,7 @@ def _vector_stream(form: str) -> tuple[list[dict[str, Any]], list[Record]]:
     return entries, decode(b"".join(h(e[form]) for e in entries))
 
 
-@pytest.mark.parametrize(("index", "vector"), _vectors("modbus_rtu"))
+@pytest.mark.parametrize(("index", "vector"), params("modbus_rtu", indexed=True))
 def test_vector_wire_form(index: int, vector: dict[str, Any]) -> None:
     """Request then response in one stream, so read responses get their register names."""
     entries, records = _vector_stream("wire")
@@ -215,7 +205,7 @@ def test_vector_wire_form(index: int, vector: dict[str, Any]) -> None:
     assert r.direction == (RESPONSE if vector["meaning"].startswith("its response") else REQUEST)
 
 
-@pytest.mark.parametrize(("index", "vector"), _vectors("modbus_rtu"))
+@pytest.mark.parametrize(("index", "vector"), params("modbus_rtu", indexed=True))
 def test_vector_as_the_manual_prints_it(index: int, vector: dict[str, Any]) -> None:
     entries, records = _vector_stream("manual_prints")
     assert len(records) == len(entries)
@@ -286,13 +276,15 @@ def test_xarm_short_register_write(value: int) -> None:
         "address": 10,
     }
     assert len(r.warnings) == 1
-    assert r.warnings[0].startswith("short register number: 10 means 1010")
+    assert r.warnings[0].startswith("this host uses short register number: 10 means 1010")
     assert r.summary == f"write target_opening={value} ({value * 70 / 1000} mm)"
     # and its echo
     records = decode(frame + frame)
     assert [r.direction for r in records] == [REQUEST, RESPONSE]
     assert records[1].summary == "-> ok (echo)"
     assert records[1].fields["numbering"] == "short"
+    # said once per device, not on every frame of a host that always does it
+    assert records[0].warnings and not records[1].warnings
 
 
 def test_short_register_read_61_to_65() -> None:
@@ -311,9 +303,10 @@ def test_short_register_read_61_to_65() -> None:
         "CMD_STATUS",
     ]
     assert req.warnings == [
-        "short register numbers: 61-65 mean 1061-1065 (the host leaves out the 1000 offset, "
-        "as some clients do)"
+        "this host uses short register numbers: 61-65 mean 1061-1065 (the host leaves out the "
+        "1000 offset, as some clients do)"
     ]
+    assert resp.fields["numbering"] == "short" and not resp.warnings
     assert req.summary == "read 5 registers from 1061 (measured_opening..state)"
     assert resp.fields["values"] == {
         "CMD_OPENLEN_ACT": 497,
@@ -353,393 +346,119 @@ def test_short_numbers_resolve(wire: int, full: int, name: str) -> None:
 
 # (id, stream: setup frames then the frame checked, direction, code, name, fields subset,
 #  summary, warnings (exact list), errors)
+NOT_EG2 = "is not one the EG2 documents (3, 6 and 16)"
+UNDOC_1008 = "undocumented register 1008 (not in the manual's map)"
+
+# fmt: off
 TABLE: list[tuple[str, list[bytes], str, int, str | None, dict[str, Any], str, list[str]]] = [
-    (
-        "read request",
-        [rd(1, 1061, 4)],
-        REQUEST,
-        3,
-        "CMD_OPENLEN_ACT..CMD_ERRORCODE",
-        {"start": 1061, "count": 4},
-        "read 4 registers from 1061 (measured_opening..fault)",
-        [],
-    ),
-    (
-        "read response",
-        [rd(1, 1061, 4), rd_resp(1, [0, -2, 37, 0])],
-        RESPONSE,
-        3,
-        "CMD_OPENLEN_ACT..CMD_ERRORCODE",
-        {"byte_count": 8, "start": 1061, "count": 4},
-        "-> measured_opening=0 (0.0 mm), current=-2, temperature_c=37 °C, fault=0 (no fault)",
-        [],
-    ),
-    (
-        "read one register",
-        [rd(2, 1065, 1)],
-        REQUEST,
-        3,
-        "CMD_STATUS",
-        {"slave": 2, "registers": ["CMD_STATUS"]},
-        "read 1 register from 1065 (state)",
-        [],
-    ),
-    (
-        "one-register response",
-        [rd(2, 1065, 1), rd_resp(2, [4])],
-        RESPONSE,
-        3,
-        "CMD_STATUS",
-        {"values": {"CMD_STATUS": 4}},
-        "-> state=4 (closing)",
-        [],
-    ),
-    (
-        "fault bits",
-        [rd(1, 1064, 2), rd_resp(1, [0x05, 3])],
-        RESPONSE,
-        3,
-        "CMD_ERRORCODE..CMD_STATUS",
-        {"values": {"CMD_ERRORCODE": 5, "CMD_STATUS": 3}},
-        "-> fault=5 (stall, over-current), state=3 (stopped, idle)",
-        [],
-    ),
-    (
-        "measured force",
-        [rd(1, 1060, 1), rd_resp(1, [243])],
-        RESPONSE,
-        3,
-        "CMD_FORCE_ACT",
-        {"values": {"CMD_FORCE_ACT": 243}},
-        "-> measured_force=243",
-        [],
-    ),
-    (
-        "response without request",
-        [rd_resp(1, [0, -2, 37, 0])],
-        RESPONSE,
-        3,
-        None,
-        {"values_raw": [0, 0xFFFE, 37, 0], "byte_count": 8},
-        "-> 4 values (registers unknown): 0, 65534, 37, 0",
-        [NO_REQUEST],
-    ),
-    (
-        "response count mismatch",
-        [rd(1, 1061, 2), rd_resp(1, [1, 2, 3])],
-        RESPONSE,
-        3,
-        None,
-        {"values_raw": [1, 2, 3]},
-        "-> 3 values (registers unknown): 1, 2, 3",
-        ["read response with 3 registers for a request of 2: registers unknown"],
-    ),
-    (
-        "write single",
-        [wr(1, 1010, 0)],
-        REQUEST,
-        6,
-        "CMD_OPENLEN_SET",
-        {"register": 1010, "name": "CMD_OPENLEN_SET", "value": 0},
-        "write target_opening=0 (0.0 mm)",
-        [],
-    ),
-    (
-        "write single echo",
-        [wr(1, 1010, 500), wr(1, 1010, 500)],
-        RESPONSE,
-        6,
-        "CMD_OPENLEN_SET",
-        {"register": 1010, "value": 500},
-        "-> ok (echo)",
-        [],
-    ),
-    (
-        "write force",
-        [wr(1, 1012, 200)],
-        REQUEST,
-        6,
-        "CMD_FORCE_SET",
-        {"value": 200},
-        "write force=200 g",
-        [],
-    ),
-    (
-        "write speed out of range",
-        [wr(1, 1011, 5000)],
-        REQUEST,
-        6,
-        "CMD_SPEED_SET",
-        {"value": 5000},
-        "write speed=5000",
-        ["speed out of range (10-1000): 5000"],
-    ),
-    (
-        "write multiple",
-        [wrm(1, 1010, [0, 1000, 1000])],
-        REQUEST,
-        16,
-        "CMD_OPENLEN_SET..CMD_FORCE_SET",
-        {"start": 1010, "count": 3, "byte_count": 6},
-        "write 3 registers from 1010: target_opening=0 (0.0 mm), speed=1000, force=1000 g",
-        [],
-    ),
-    (
-        "write multiple response",
-        [wrm(1, 1010, [0, 1000, 1000]), wrm_resp(1, 1010, 3)],
-        RESPONSE,
-        16,
-        "CMD_OPENLEN_SET..CMD_FORCE_SET",
-        {"start": 1010, "count": 3},
-        "-> wrote 3 registers from 1010",
-        [],
-    ),
-    (
-        "write multiple response mismatch",
-        [wrm(1, 1010, [1, 2, 3]), wrm_resp(1, 1011, 3)],
-        RESPONSE,
-        16,
-        "CMD_SPEED_SET..REG_1013",
-        {"start": 1011, "count": 3},
-        "-> wrote 3 registers from 1011",
-        [
-            "the response (start 1011, count 3) does not match the request (start 1010, count 3)",
-            "undocumented register 1013 (not in the manual's map)",
-        ],
-    ),
-    (
-        "exception",
-        [rd(1, 1061, 4), exc(1, 3, 2)],
-        RESPONSE,
-        0x83,
-        "EXCEPTION",
-        {"function": 3, "exception_code": 2, "exception_text": "illegal data address"},
-        "exception 2: illegal data address",
-        [],
-    ),
-    (
-        "exception without request",
-        [exc(1, 6, 3)],
-        RESPONSE,
-        0x86,
-        "EXCEPTION",
-        {"function": 6, "exception_code": 3, "exception_text": "illegal data value"},
-        "exception 3: illegal data value",
-        [],
-    ),
-    (
-        "exception 1",
-        [exc(9, 16, 1)],
-        RESPONSE,
-        0x90,
-        "EXCEPTION",
-        {"exception_text": "illegal function"},
-        "exception 1: illegal function",
-        [],
-    ),
-    (
-        "exception 4",
-        [exc(9, 16, 4)],
-        RESPONSE,
-        0x90,
-        "EXCEPTION",
-        {"exception_text": "server device failure"},
-        "exception 4: server device failure",
-        [],
-    ),
-    (
-        "exception unknown code",
-        [exc(9, 3, 0x42)],
-        RESPONSE,
-        0x83,
-        "EXCEPTION",
-        {"exception_code": 0x42},
-        "exception 66: unknown exception code 66",
-        ["exception code 66 is not a standard Modbus exception"],
-    ),
-    (
-        "undocumented write",
-        [wr(1, 1008, 7)],
-        REQUEST,
-        6,
-        "REG_1008",
-        {"register": 1008, "name": "REG_1008", "value": 7},
-        "write reg_1008=7",
-        ["undocumented register 1008 (not in the manual's map)"],
-    ),
-    (
-        "undocumented read",
-        [rd(1, 1008, 1), rd_resp(1, [0xBEEF])],
-        RESPONSE,
-        3,
-        "REG_1008",
-        {"values": {"REG_1008": 0xBEEF}},
-        "-> reg_1008=48879",
-        ["undocumented register 1008 (not in the manual's map)"],
-    ),
-    (
-        "undocumented span",
-        [rd(1, 1012, 6)],
-        REQUEST,
-        3,
-        "CMD_FORCE_SET..CMD_MIN_OPENLEN",
-        {
-            "registers": [
-                "CMD_FORCE_SET",
-                "REG_1013",
-                "REG_1014",
-                "REG_1015",
-                "CMD_MAX_OPENLEN",
-                "CMD_MIN_OPENLEN",
-            ]
-        },
-        "read 6 registers from 1012 (force..min_opening)",
-        ["undocumented registers 1013-1015 (not in the manual's map)"],
-    ),
-    (
-        "outside the map",
-        [wr(1, 2000, 1)],
-        REQUEST,
-        6,
-        "REG_2000",
-        {"register": 2000, "name": "REG_2000", "value": 1},
-        "write reg_2000=1",
-        ["register 2000 is outside the EG2 register map"],
-    ),
-    (
-        "outside the map, span",
-        [rd(1, 1064, 4)],
-        REQUEST,
-        3,
-        "CMD_ERRORCODE..REG_1067",
-        {"registers": ["CMD_ERRORCODE", "CMD_STATUS", "REG_1066", "REG_1067"]},
-        "read 4 registers from 1064 (fault..reg_1067)",
-        ["registers 1066-1067 are outside the EG2 register map"],
-    ),
-    (
-        "register 0",
-        [rd(1, 0, 1)],
-        REQUEST,
-        3,
-        "REG_0",
-        {"start": 0},
-        "read 1 register from 0 (reg_0)",
-        ["register 0 is outside the EG2 register map"],
-    ),
-    (
-        "write read-only",
-        [wr(1, 1061, 5)],
-        REQUEST,
-        6,
-        "CMD_OPENLEN_ACT",
-        {"value": 5},
-        "write measured_opening=5 (0.35 mm)",
-        ["write to read-only register 1061 (CMD_OPENLEN_ACT)"],
-    ),
-    (
-        "write multiple read-only",
-        [wrm(1, 1062, [1, 2])],
-        REQUEST,
-        16,
-        "CMD_CURRENT..CMD_TEMP",
-        {"values": {"CMD_CURRENT": 1, "CMD_TEMP": 2}},
-        "write 2 registers from 1062: current=1, temperature_c=2 °C",
-        ["write to read-only registers 1062 (CMD_CURRENT), 1063 (CMD_TEMP)"],
-    ),
-    (
-        "signed current",
-        [rd(1, 1062, 1), rd_resp(1, [0x8000])],
-        RESPONSE,
-        3,
-        "CMD_CURRENT",
-        {"values": {"CMD_CURRENT": -32768}},
-        "-> current=-32768",
-        ["current out of range (-2000-2000): -32768"],
-    ),
-    (
-        "temperature out of range",
-        [rd(1, 1063, 1), rd_resp(1, [8704])],
-        RESPONSE,
-        3,
-        "CMD_TEMP",
-        {"values": {"CMD_TEMP": 8704}},
-        "-> temperature_c=8704 °C",
-        ["temperature_c out of range (0-100): 8704"],
-    ),
-    (
-        "read count 0",
-        [rd(1, 1061, 0)],
-        REQUEST,
-        3,
-        None,
-        {"count": 0, "registers": []},
-        "read 0 registers from 1061",
-        ["count 0 outside the Modbus limit of 1-125 registers"],
-    ),
-    (
-        "broadcast write",
-        [wr(0, 1006, 1)],
-        REQUEST,
-        6,
-        "CMD_STOP",
-        {"slave": 0, "value": 1},
-        "write stop=1",
-        [],
-    ),
-    (
-        "read input registers",
-        [rd(1, 1061, 1, fc=4), rd_resp(1, [10], fc=4)],
-        RESPONSE,
-        4,
-        "CMD_OPENLEN_ACT",
-        {"values": {"CMD_OPENLEN_ACT": 10}},
-        "-> measured_opening=10 (0.7 mm)",
-        ["function 4 (read input registers) is not one the EG2 documents (3, 6 and 16)"],
-    ),
-    (
-        "read coils",
-        [pm(bm.ReadCoilsRequest(address=0, count=10, dev_id=2))],
-        REQUEST,
-        1,
-        "READ_COILS",
-        {"start": 0, "count": 10},
-        "read 10 coils from 0",
-        ["function 1 (read coils) is not one the EG2 documents (3, 6 and 16)"],
-    ),
-    (
-        "read coils response",
-        [
-            pm(bm.ReadCoilsRequest(address=0, count=10, dev_id=2)),
-            pm(bm.ReadCoilsResponse(bits=[True, False, True] + [False] * 7, dev_id=2)),
-        ],
-        RESPONSE,
-        1,
-        "READ_COILS",
-        {"bits": [1, 0, 1, 0, 0, 0, 0, 0, 0, 0]},
-        "-> coils 1010000000",
-        ["function 1 (read coils) is not one the EG2 documents (3, 6 and 16)"],
-    ),
-    (
-        "write coil",
-        [pm(bm.WriteSingleCoilRequest(address=3, bits=[True], dev_id=2))],
-        REQUEST,
-        5,
-        "WRITE_SINGLE_COIL",
-        {"coil": 3, "value": 0xFF00},
-        "write coil 3 on",
-        ["function 5 (write single coil) is not one the EG2 documents (3, 6 and 16)"],
-    ),
-    (
-        "write coils",
-        [pm(bm.WriteMultipleCoilsRequest(address=3, bits=[True] * 10, dev_id=2))],
-        REQUEST,
-        15,
-        "WRITE_MULTIPLE_COILS",
-        {"start": 3, "count": 10, "byte_count": 2},
-        "write 10 coils from 3: 1111111111",
-        ["function 15 (write multiple coils) is not one the EG2 documents (3, 6 and 16)"],
-    ),
+    ("read request", [rd(1, 1061, 4)], REQUEST, 3, "CMD_OPENLEN_ACT..CMD_ERRORCODE",
+     {"start": 1061, "count": 4}, "read 4 registers from 1061 (measured_opening..fault)", []),
+    ("read response", [rd(1, 1061, 4), rd_resp(1, [0, -2, 37, 0])], RESPONSE, 3,
+     "CMD_OPENLEN_ACT..CMD_ERRORCODE", {"byte_count": 8, "start": 1061, "count": 4},
+     "-> measured_opening=0 (0.0 mm), current=-2, temperature_c=37 °C, fault=0 (no fault)", []),
+    ("read one register", [rd(2, 1065, 1)], REQUEST, 3, "CMD_STATUS",
+     {"slave": 2, "registers": ["CMD_STATUS"]}, "read 1 register from 1065 (state)", []),
+    ("one-register response", [rd(2, 1065, 1), rd_resp(2, [4])], RESPONSE, 3, "CMD_STATUS",
+     {"values": {"CMD_STATUS": 4}}, "-> state=4 (closing)", []),
+    ("fault bits", [rd(1, 1064, 2), rd_resp(1, [0x05, 3])], RESPONSE, 3,
+     "CMD_ERRORCODE..CMD_STATUS", {"values": {"CMD_ERRORCODE": 5, "CMD_STATUS": 3}},
+     "-> fault=5 (stall, over-current), state=3 (stopped, idle)", []),
+    ("measured force", [rd(1, 1060, 1), rd_resp(1, [243])], RESPONSE, 3, "CMD_FORCE_ACT",
+     {"values": {"CMD_FORCE_ACT": 243}}, "-> measured_force=243", []),
+    ("response without request", [rd_resp(1, [0, -2, 37, 0])], RESPONSE, 3, None,
+     {"values_raw": [0, 0xFFFE, 37, 0], "byte_count": 8},
+     "-> 4 values (registers unknown): 0, 65534, 37, 0", [NO_REQUEST]),
+    ("response count mismatch", [rd(1, 1061, 2), rd_resp(1, [1, 2, 3])], RESPONSE, 3, None,
+     {"values_raw": [1, 2, 3]}, "-> 3 values (registers unknown): 1, 2, 3",
+     ["read response with 3 registers for a request of 2: registers unknown"]),
+    ("write single", [wr(1, 1010, 0)], REQUEST, 6, "CMD_OPENLEN_SET",
+     {"register": 1010, "name": "CMD_OPENLEN_SET", "value": 0},
+     "write target_opening=0 (0.0 mm)", []),
+    ("write single echo", [wr(1, 1010, 500), wr(1, 1010, 500)], RESPONSE, 6,
+     "CMD_OPENLEN_SET", {"register": 1010, "value": 500}, "-> ok (echo)", []),
+    ("write force", [wr(1, 1012, 200)], REQUEST, 6, "CMD_FORCE_SET", {"value": 200},
+     "write force=200 g", []),
+    ("write speed out of range", [wr(1, 1011, 5000)], REQUEST, 6, "CMD_SPEED_SET",
+     {"value": 5000}, "write speed=5000", ["speed out of range (10-1000): 5000"]),
+    ("write multiple", [wrm(1, 1010, [0, 1000, 1000])], REQUEST, 16,
+     "CMD_OPENLEN_SET..CMD_FORCE_SET", {"start": 1010, "count": 3, "byte_count": 6},
+     "write 3 registers from 1010: target_opening=0 (0.0 mm), speed=1000, force=1000 g", []),
+    ("write multiple response", [wrm(1, 1010, [0, 1000, 1000]), wrm_resp(1, 1010, 3)],
+     RESPONSE, 16, "CMD_OPENLEN_SET..CMD_FORCE_SET", {"start": 1010, "count": 3},
+     "-> wrote 3 registers from 1010", []),
+    ("write multiple response mismatch", [wrm(1, 1010, [1, 2, 3]), wrm_resp(1, 1011, 3)],
+     RESPONSE, 16, "CMD_SPEED_SET..REG_1013", {"start": 1011, "count": 3},
+     "-> wrote 3 registers from 1011",
+     ["the response (start 1011, count 3) does not match the request (start 1010, count 3)",
+      "undocumented register 1013 (not in the manual's map)"]),
+    ("exception", [rd(1, 1061, 4), pm_exc(1, 3, 2)], RESPONSE, 0x83, "EXCEPTION",
+     {"function": 3, "exception_code": 2, "exception_text": "illegal data address"},
+     "exception 2: illegal data address", []),
+    ("exception without request", [exc(1, 6, 3)], RESPONSE, 0x86, "EXCEPTION",
+     {"function": 6, "exception_code": 3, "exception_text": "illegal data value"},
+     "exception 3: illegal data value", []),
+    ("exception 1", [pm_exc(9, 16, 1)], RESPONSE, 0x90, "EXCEPTION",
+     {"exception_text": "illegal function"}, "exception 1: illegal function", []),
+    ("exception 4", [exc(9, 16, 4)], RESPONSE, 0x90, "EXCEPTION",
+     {"exception_text": "server device failure"}, "exception 4: server device failure", []),
+    ("exception unknown code", [exc(9, 3, 0x42)], RESPONSE, 0x83, "EXCEPTION",
+     {"exception_code": 0x42}, "exception 66: unknown exception code 66",
+     ["exception code 66 is not a standard Modbus exception"]),
+    ("undocumented write", [wr(1, 1008, 7)], REQUEST, 6, "REG_1008",
+     {"register": 1008, "name": "REG_1008", "value": 7}, "write reg_1008=7", [UNDOC_1008]),
+    ("undocumented read", [rd(1, 1008, 1), rd_resp(1, [0xBEEF])], RESPONSE, 3, "REG_1008",
+     {"values": {"REG_1008": 0xBEEF}}, "-> reg_1008=48879", [UNDOC_1008]),
+    ("undocumented span", [rd(1, 1012, 6)], REQUEST, 3, "CMD_FORCE_SET..CMD_MIN_OPENLEN",
+     {"registers": ["CMD_FORCE_SET", "REG_1013", "REG_1014", "REG_1015", "CMD_MAX_OPENLEN",
+                    "CMD_MIN_OPENLEN"]},
+     "read 6 registers from 1012 (force..min_opening)",
+     ["undocumented registers 1013-1015 (not in the manual's map)"]),
+    ("outside the map", [wr(1, 2000, 1)], REQUEST, 6, "REG_2000",
+     {"register": 2000, "name": "REG_2000", "value": 1}, "write reg_2000=1",
+     ["register 2000 is outside the EG2 register map"]),
+    ("outside the map, span", [rd(1, 1064, 4)], REQUEST, 3, "CMD_ERRORCODE..REG_1067",
+     {"registers": ["CMD_ERRORCODE", "CMD_STATUS", "REG_1066", "REG_1067"]},
+     "read 4 registers from 1064 (fault..reg_1067)",
+     ["registers 1066-1067 are outside the EG2 register map"]),
+    ("register 0", [rd(1, 0, 1)], REQUEST, 3, "REG_0", {"start": 0},
+     "read 1 register from 0 (reg_0)", ["register 0 is outside the EG2 register map"]),
+    ("write read-only", [wr(1, 1061, 5)], REQUEST, 6, "CMD_OPENLEN_ACT", {"value": 5},
+     "write measured_opening=5 (0.35 mm)",
+     ["write to read-only register 1061 (CMD_OPENLEN_ACT)"]),
+    ("write multiple read-only", [wrm(1, 1062, [1, 2])], REQUEST, 16,
+     "CMD_CURRENT..CMD_TEMP", {"values": {"CMD_CURRENT": 1, "CMD_TEMP": 2}},
+     "write 2 registers from 1062: current=1, temperature_c=2 °C",
+     ["write to read-only registers 1062 (CMD_CURRENT), 1063 (CMD_TEMP)"]),
+    ("signed current", [rd(1, 1062, 1), rd_resp(1, [0x8000])], RESPONSE, 3, "CMD_CURRENT",
+     {"values": {"CMD_CURRENT": -32768}}, "-> current=-32768",
+     ["current out of range (-2000-2000): -32768"]),
+    ("temperature out of range", [rd(1, 1063, 1), rd_resp(1, [8704])], RESPONSE, 3,
+     "CMD_TEMP", {"values": {"CMD_TEMP": 8704}}, "-> temperature_c=8704 °C",
+     ["temperature_c out of range (0-100): 8704"]),
+    ("read count 0", [rd(1, 1061, 0)], REQUEST, 3, None, {"count": 0, "registers": []},
+     "read 0 registers from 1061", ["count 0 outside the Modbus limit of 1-125 registers"]),
+    ("broadcast write", [wr(0, 1006, 1)], REQUEST, 6, "CMD_STOP", {"slave": 0, "value": 1},
+     "write stop=1", []),
+    ("read input registers", [rd(1, 1061, 1, fc=4), rd_resp(1, [10], fc=4)], RESPONSE, 4,
+     "CMD_OPENLEN_ACT", {"values": {"CMD_OPENLEN_ACT": 10}}, "-> measured_opening=10 (0.7 mm)",
+     [f"function 4 (read input registers) {NOT_EG2}"]),
+    ("read coils", [pm(bm.ReadCoilsRequest(address=0, count=10, dev_id=2))], REQUEST, 1,
+     "READ_COILS", {"start": 0, "count": 10}, "read 10 coils from 0",
+     [f"function 1 (read coils) {NOT_EG2}"]),
+    ("read coils response",
+     [pm(bm.ReadCoilsRequest(address=0, count=10, dev_id=2)),
+      pm(bm.ReadCoilsResponse(bits=[True, False, True] + [False] * 7, dev_id=2))],
+     RESPONSE, 1, "READ_COILS", {"bits": [1, 0, 1, 0, 0, 0, 0, 0, 0, 0]},
+     "-> coils 1010000000", [f"function 1 (read coils) {NOT_EG2}"]),
+    ("write coil", [pm(bm.WriteSingleCoilRequest(address=3, bits=[True], dev_id=2))], REQUEST,
+     5, "WRITE_SINGLE_COIL", {"coil": 3, "value": 0xFF00}, "write coil 3 on",
+     [f"function 5 (write single coil) {NOT_EG2}"]),
+    ("write coils",
+     [pm(bm.WriteMultipleCoilsRequest(address=3, bits=[True] * 10, dev_id=2))], REQUEST, 15,
+     "WRITE_MULTIPLE_COILS", {"start": 3, "count": 10, "byte_count": 2},
+     "write 10 coils from 3: 1111111111", [f"function 15 (write multiple coils) {NOT_EG2}"]),
 ]
+# fmt: on
 
 
 @pytest.mark.parametrize(

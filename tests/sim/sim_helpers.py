@@ -2,24 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
-from typing import Any
 
-import pytest
 import serial
+from protocol_vectors import params
 
-VECTORS_PATH = Path(__file__).parents[2].parent / "shared/protocol/vectors.json"
-
-
-def vectors(key: str) -> list[Any]:
-    """vectors.json entries as pytest params, or one skipped param when the file is absent."""
-    if not VECTORS_PATH.exists():
-        reason = f"protocol vectors not found at {VECTORS_PATH}"
-        return [pytest.param(None, marks=pytest.mark.skip(reason=reason))]
-    entries = json.loads(VECTORS_PATH.read_text())[key]
-    return [pytest.param(e, id=e["meaning"]) for e in entries]
+vectors = params
 
 
 def h(text: str) -> bytes:

@@ -26,7 +26,8 @@ from decoders.eg2_serial import Eg2SerialDecoder
 from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import GARBAGE, REQUEST, RESPONSE, Chunk, Record
 
-FAST: dict[str, Any] = {"speed": 1000, "dwell_s": 0.03}
+# a generous response time-out: a loaded CI machine must not turn a late answer into a miss
+FAST: dict[str, Any] = {"speed": 1000, "dwell_s": 0.03, "timeout_s": 0.25}
 
 
 class Tap:
@@ -131,7 +132,9 @@ def test_noisy_line_still_completes(tapped_line: tuple[PtyBus, Tap]) -> None:
     bus, tap = tapped_line
     noise: dict[str, Any] = {"corrupt": 0.2, "garbage": 0.2, "drop": 0.2, "seed": 5}
     with ModbusGripperServer(bus.path("gripper"), [GripperModel(1, object_width=800)], **noise):
-        result = run_host_cycle("modbus", bus.path("host"), [1], 1, retries=8, **FAST)
+        # dropped answers are the point here: a short time-out keeps the polling dense
+        fast_retry = {**FAST, "timeout_s": 0.03}
+        result = run_host_cycle("modbus", bus.path("host"), [1], 1, retries=8, **fast_retry)
     _check_grips(result, [1], 1)
     assert result.retries > 0
     records = _decoded(ModbusRtuDecoder(), tap.data)
