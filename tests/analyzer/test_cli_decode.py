@@ -277,3 +277,61 @@ def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
         check=True,
     )
     assert plain.stderr == b""
+
+
+@pytest.mark.parametrize("kind", ["bytes", "candump"])
+def test_parallel_decode_equals_one_piece(
+    capsysbinary, tmp_path: Path, monkeypatch, kind: str
+) -> None:
+    """Large captures are decoded in parts on every core; the output must not change."""
+    import random
+
+    import analyzer.parallel as parallel
+    from decoders import build as b
+
+    # small parts, so that a small file is split into many, with joins everywhere
+    monkeypatch.setitem(parallel.PART_BYTES, kind, 20_000)
+    monkeypatch.setitem(parallel.WARMUP, kind, 8_000)
+    monkeypatch.setitem(parallel.MIN_PARALLEL_BYTES, kind, 40_000)
+    rng = random.Random(4)
+    if kind == "bytes":
+        path = tmp_path / "noisy.bin"
+        out = bytearray()
+        while len(out) < 200_000:
+            dev = rng.randint(1, 3)
+            out += b.serial_frame(dev, 0xD9)
+            reply = bytearray(
+                b.serial_frame(dev, 0xD9, b.u16le(rng.randint(0, 1000)), response=True)
+            )
+            if rng.random() < 0.05:
+                reply[-1] ^= 0xFF  # bad checksum
+            out += reply
+            if rng.random() < 0.05:
+                out += bytes(rng.randrange(256) for _ in range(rng.randint(1, 9)))  # garbage
+        path.write_bytes(bytes(out))
+    else:
+        path = tmp_path / "busy.log"
+        lines = []
+        t = 1000.0
+        for i in range(6000):
+            dev = 1 + i % 3
+            t += 0.0003
+            lines.append(b.candump_line(b.can_read_request(dev, 1120, 8, t=t)))
+            if rng.random() > 0.02:  # a few go unanswered
+                t += 0.0004
+                data = b.u16le(rng.randint(0, 500), rng.randint(0, 1000), 0, 36)
+                lines.append(b.candump_line(b.can_read_response(dev, 1120, data, t=t)))
+        path.write_text("\n".join(lines) + "\n")
+    assert parallel.splittable(path, "jsonl", kind)
+    code, split, err = run_cli(capsysbinary, "decode", "-f", "jsonl", str(path))
+    assert code == 0 and "one piece" not in err
+    code, whole, _ = run_cli(capsysbinary, "decode", "-f", "jsonl", "--jobs", "1", str(path))
+    assert code == 0
+    assert split == whole
+    records = [json.loads(line) for line in whole.splitlines()]
+    assert sum(1 for r in records if r["pair"] is not None) > 1000
+    if kind == "bytes":
+        assert sum(r["length"] for r in records) == path.stat().st_size
+    code, split_csv, _ = run_cli(capsysbinary, "decode", "-f", "csv", str(path))
+    code, whole_csv, _ = run_cli(capsysbinary, "decode", "-f", "csv", "-j", "1", str(path))
+    assert split_csv == whole_csv
