@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 from typing import IO, Any
 
 from decoders.model import Record
@@ -20,7 +21,8 @@ class TextOutput(OutputBase):
 
     def __init__(self, out: IO[str] | None = None, colour: bool | None = None) -> None:
         self.out = out or sys.stdout
-        self.sink = TextSink(self.out, colour=colour)
+        # live: time counts from the session's start (buses interleave around any first record)
+        self.sink = TextSink(self.out, colour=colour, t0=time.time())
 
     def records(self, records: list[Record]) -> None:
         self.sink.write(records)

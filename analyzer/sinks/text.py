@@ -28,10 +28,13 @@ def use_colour(stream: IO[str]) -> bool:
 class TextFormatter:
     """Formats records as lines; times are shown relative to the first timestamp seen."""
 
-    def __init__(self, colour: bool = False, absolute_time: bool = False) -> None:
+    def __init__(
+        self, colour: bool = False, absolute_time: bool = False, t0: float | None = None
+    ) -> None:
+        """``t0``: the time shown as 0 (a live session's start); default the first record's."""
         self.colour = colour
         self.absolute_time = absolute_time
-        self._t0: float | None = None
+        self._t0 = t0
 
     def time_column(self, rec: Record) -> str:
         if rec.t is None:
@@ -70,10 +73,16 @@ class TextFormatter:
 class TextSink:
     """Writes formatted lines to a text stream."""
 
-    def __init__(self, out: IO[str], colour: bool | None = None, absolute_time: bool = False):
+    def __init__(
+        self,
+        out: IO[str],
+        colour: bool | None = None,
+        absolute_time: bool = False,
+        t0: float | None = None,
+    ):
         self.out = out
         colour = use_colour(out) if colour is None else colour
-        self.formatter = TextFormatter(colour=colour, absolute_time=absolute_time)
+        self.formatter = TextFormatter(colour=colour, absolute_time=absolute_time, t0=t0)
 
     def write(self, records: list[Record]) -> None:
         fmt = self.formatter.format
