@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from decoders.model import Chunk, Record
+from decoders.model import CanFrame, Chunk, Record
 
 from .pipeline import Decoding, Item
 from .sources.can_files import CandumpReader, _is_gzip
@@ -36,7 +36,9 @@ from .sources.capture import RawBytesReader, can_bus_name
 # Part sizes and warm-ups per kind of input. A candump log carries time: its warm-up covers
 # the longest a request may wait for its answer (a save, 2 s) on a busy bus. A raw dump has
 # no timing, so pairing state lasts only until the next request: a short warm-up will do.
-PART_BYTES = {"candump": 6 << 20, "bytes": 1 << 20}
+PART_BYTES = {"candump": 6 << 20, "bytes": 1 << 20}  # the smallest part
+PART_MAX = 64 << 20  # the largest part (keeps the progress bar moving on huge files)
+PARTS_PER_WORKER = 2  # few parts: each costs a warm-up; two per worker keep both busy
 WARMUP = {"candump": 1 << 20, "bytes": 64 << 10}
 MIN_PARALLEL_BYTES = {"candump": 8 << 20, "bytes": 2 << 20}  # smaller: one piece
 READ = 1 << 16
@@ -120,9 +122,10 @@ def _frame_lines_before(path: Path, points: list[int]) -> list[int]:
     return [counts[p] for p in points]
 
 
-def plan(path: Path, kind: str, base: dict[str, Any]) -> list[Part]:
+def plan(path: Path, kind: str, base: dict[str, Any], workers: int = 2) -> list[Part]:
     size = path.stat().st_size
-    cuts = list(range(0, size, PART_BYTES[kind]))[1:]
+    step = max(PART_BYTES[kind], min(PART_MAX, -(-size // (workers * PARTS_PER_WORKER))))
+    cuts = list(range(0, size, step))[1:]
     if kind == "candump":
         cuts = _line_starts(path, cuts)
     bounds = [0, *sorted(set(c for c in cuts if 0 < c < size)), size]
@@ -155,15 +158,18 @@ def plan(path: Path, kind: str, base: dict[str, Any]) -> list[Part]:
 
 
 def _items(part: Part) -> Iterator[Item]:
-    if part.kind == "bytes":
-        bus = part.bus or "serial"
-        with open(part.path, "rb") as f:
-            f.seek(part.warm_lo)
-            left = part.cool_hi - part.warm_lo
-            while left > 0 and (data := f.read(min(READ, left))):
-                left -= len(data)
-                yield Item(bus, Chunk(data))
-        return
+    """A raw dump's part (with its warm-up and overrun) as chunks."""
+    bus = part.bus or "serial"
+    with open(part.path, "rb") as f:
+        f.seek(part.warm_lo)
+        left = part.cool_hi - part.warm_lo
+        while left > 0 and (data := f.read(min(READ, left))):
+            left -= len(data)
+            yield Item(bus, Chunk(data))
+
+
+def _can_frames(part: Part) -> Iterator[tuple[str, CanFrame]]:
+    """A candump log's part (with its warm-up and overrun) as (bus, frame)."""
     reader = CandumpReader(part.path, (part.warm_lo, part.cool_hi))
     fixed = part.bus
     names: dict[str | None, str] = {}
@@ -171,7 +177,7 @@ def _items(part: Part) -> Iterator[Item]:
         name = fixed or names.get(frame.channel)
         if name is None:
             name = names[frame.channel] = can_bus_name(frame.channel)
-        yield Item(name, frame)
+        yield name, frame
     if reader.errors:
         # a malformed line shifts the frame numbering this split relies on
         raise JoinError("; ".join(reader.errors[:3]))
@@ -242,11 +248,19 @@ def decode_part(part: Part) -> PartResult:
             write(mine)
 
         batch: list[Record] = []
-        for item in _items(part):
-            batch += decoding.feed(item)
-            if len(batch) >= 4096:
-                take(batch)
-                batch = []
+        if is_bytes:
+            for item in _items(part):
+                batch += decoding.feed(item)
+                if len(batch) >= 4096:
+                    take(batch)
+                    batch = []
+        else:
+            feed_can = decoding.feed_can
+            for bus, frame in _can_frames(part):
+                batch += feed_can(bus, frame)
+                if len(batch) >= 4096:
+                    take(batch)
+                    batch = []
         batch += decoding.finish() if at_end else _flush_without_end(decoding)
         take(batch)
     return PartResult(out_path, first, end, count, [])
@@ -278,10 +292,11 @@ def run_parallel(
             "errors_only": args.errors_only,
             "tmpdir": tmpdir,
         }
-        parts = plan(path, kind, base)
+        workers = max(1, jobs or os.cpu_count() or 2)
+        parts = plan(path, kind, base, workers)
         ctx = multiprocessing.get_context("fork")
         results: list[PartResult] = []
-        workers = min(jobs or os.cpu_count() or 2, len(parts))
+        workers = min(workers, len(parts))
         with ctx.Pool(workers) as pool:
             for part, res in zip(parts, pool.imap(decode_part, parts), strict=True):
                 if results:

@@ -62,9 +62,7 @@ class Decoding:
     def feed(self, item: Item) -> list[Record]:
         payload = item.payload
         if isinstance(payload, CanFrame):
-            rec = self._decode_can(item.bus, payload)
-            self.linter.check(rec)
-            return self.pairer.push(rec)
+            return self.feed_can(item.bus, payload)
         key = (item.bus, item.stream)
         dec = self._streams.get(key)
         if dec is None:
@@ -73,6 +71,12 @@ class Decoding:
                 return []
             return self._post(self._replay(key, dec))
         return self._post(dec.feed(payload))
+
+    def feed_can(self, bus: str, frame: CanFrame) -> list[Record]:
+        """One CAN frame (``feed`` without the Item, for tight loops over CAN captures)."""
+        rec = self._decode_can(bus, frame)
+        self.linter.check(rec)
+        return self.pairer.push(rec)
 
     def feed_many(self, items: Iterable[Item]) -> Iterator[Record]:
         for item in items:
