@@ -6,8 +6,8 @@ Generates one million realistic frames per protocol (a raw serial dump, a raw Mo
 a candump -L log), runs the real CLI on each in a subprocess ``--runs`` times and reports the
 median frames/s and the peak RSS. Where tshark is installed, the same CAN frames written as a
 SocketCAN pcap are dissected with ``tshark -T fields`` in the same run for comparison.
-Targets (issue 2): >= tshark on CAN (about 150k frames/s here), >= 150k frames/s on serial and
-Modbus, peak memory < 200 MB.
+Targets (issue 2): >= tshark on CAN (measured in the same run; 150k frames/s when tshark is not
+installed), >= 150k frames/s on serial and Modbus, peak memory < 200 MB.
 """
 
 from __future__ import annotations
@@ -132,7 +132,8 @@ def main() -> int:
         fps, mb = results[name]
         target = MUST_FPS
         if name == "can" and "can (tshark)" in results:
-            target = max(MUST_FPS, int(results["can (tshark)"][0]))
+            # the issue's must for CAN: at least as fast as tshark on the same frames, same run
+            target = int(results["can (tshark)"][0])
         verdict = "ok" if fps >= target and mb < MUST_MB else "BELOW TARGET"
         ok &= verdict == "ok"
         print(
