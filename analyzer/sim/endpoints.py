@@ -34,8 +34,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Any, Final, Self
+from typing import Any, Final
 
 import can
 import serial
@@ -46,6 +45,7 @@ from decoders.eg2_serial import Eg2SerialDecoder, checksum
 from decoders.modbus_rtu import CRC_SWAPPED, ModbusRtuDecoder
 from decoders.model import EG2_CAN, FRAME, REQUEST, CanFrame, Chunk, Record
 
+from ..lifecycle import Running
 from .gripper import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, ILLEGAL_VALUE, GripperModel
 
 SERIAL_BROADCAST: Final = 255
@@ -72,7 +72,7 @@ class ServerStats:
     exceptions: int = 0  # Modbus exception responses
 
 
-class _Server:
+class _Server(Running):
     """What the three servers share: models, lock, thread, response schedule, noise."""
 
     name = "server"
@@ -165,18 +165,6 @@ class _Server:
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
-
-    def __enter__(self) -> Self:
-        self.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.stop()
 
     def _main(self) -> None:
         try:

@@ -24,8 +24,8 @@ import time
 import tty
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from types import TracebackType
-from typing import Self
+
+from ..lifecycle import Closing
 
 ByteCallback = Callable[[str, bytes, float], None]
 
@@ -45,7 +45,7 @@ class _Endpoint:
         return self.master >= 0
 
 
-class PtyBus:
+class PtyBus(Closing):
     """N pty endpoints joined like the drops of one RS485 line.
 
     ``on_bytes(name, data, t)``, if given, is called from the relay thread for every chunk an
@@ -163,17 +163,6 @@ class PtyBus:
         for fd in (self._wake_r, self._wake_w):
             with contextlib.suppress(OSError):
                 os.close(fd)
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # -- internals (called with the lock held) ----------------------------------------------
 

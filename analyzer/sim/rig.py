@@ -14,11 +14,11 @@ from __future__ import annotations
 import os
 import threading
 import time
-from types import TracebackType
 from typing import Any
 
 from decoders.model import EG2_SERIAL, MODBUS_RTU
 
+from ..lifecycle import Running
 from ..sources.can_tap import CanTap
 from ..sources.live import Tap, wait_open
 from ..sources.serial_tap import SerialTap
@@ -31,7 +31,7 @@ BUSES = ("serial", "modbus", "can")
 BUS_NAMES = {"serial": "rs232", "modbus": "rs485", "can": "can0"}
 
 
-class DemoRig:
+class DemoRig(Running):
     """Context manager: start() everything, ``taps`` to watch it, stop() in the right order."""
 
     def __init__(self, buses: tuple[str, ...] = BUSES, noise: float = 0.0, seed: int = 1) -> None:
@@ -119,14 +119,3 @@ class DemoRig:
             server.stop()
         for line in self._ptybuses:
             line.close()
-
-    def __enter__(self) -> DemoRig:
-        return self.start()
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.stop()

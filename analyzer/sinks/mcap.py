@@ -33,7 +33,6 @@ import os
 import re
 import time
 from datetime import UTC, datetime
-from types import TracebackType
 from typing import IO, Any
 
 import orjson
@@ -43,6 +42,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 from decoders.model import CanFrame, Record
 
 from .. import __version__
+from ..lifecycle import Closing
 from ..pipeline import Item
 from ..sources.live import ERROR, WARNING, SourceEvent
 
@@ -237,7 +237,7 @@ def metadata_strings(metadata: dict[str, Any]) -> dict[str, str]:
     return {str(k): v if isinstance(v, str) else _dumps(v).decode() for k, v in metadata.items()}
 
 
-class McapRecorder:
+class McapRecorder(Closing):
     """Records a session into an MCAP file (see the module doc for the layout).
 
     ``metadata``: what to say about the session, e.g. ``{"sources": [{"bus": "can0",
@@ -369,17 +369,6 @@ class McapRecorder:
             self._writer.finish()
         finally:
             self._file.close()
-
-    def __enter__(self) -> McapRecorder:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # -- internals ------------------------------------------------------------------------------
 

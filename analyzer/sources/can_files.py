@@ -26,11 +26,13 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Protocol, Self
+from typing import Any, Protocol
 
 import can
 
 from decoders.model import CanFrame
+
+from ..lifecycle import Closing
 
 MAX_ERRORS = 100  # errors listed per file; ``bad_lines`` counts them all
 READ_BUFFER = 1 << 20
@@ -83,7 +85,7 @@ def _is_gzip(path: Path) -> bool:
     return path.suffix.lower() == ".gz"
 
 
-class _FileReaderBase:
+class _FileReaderBase(Closing):
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         self.errors: list[str] = []
@@ -93,17 +95,6 @@ class _FileReaderBase:
 
     def __iter__(self) -> Iterator[CanFrame]:
         raise NotImplementedError
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         if self._file is not None:

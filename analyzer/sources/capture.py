@@ -14,18 +14,18 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 from decoders.model import Chunk
 
+from ..lifecycle import Closing
 from ..pipeline import Item
 from . import can_files
 
 READ_SIZE = 1 << 16
 
 
-class CaptureReader:
+class CaptureReader(Closing):
     """Base: a capture file opened for reading. Subclasses implement ``__iter__``."""
 
     kind = "bytes"  # or "can"
@@ -47,17 +47,6 @@ class CaptureReader:
 
     def __iter__(self) -> Iterator[Item]:
         raise NotImplementedError
-
-    def __enter__(self) -> CaptureReader:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         pass
