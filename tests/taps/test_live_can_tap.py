@@ -6,49 +6,24 @@ import os
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import Any
 
 import can
 import pytest
 from can.interfaces.virtual import VirtualBus
+from tap_helpers import Collector as BaseCollector
 
-from analyzer.pipeline import Item
 from analyzer.sources.can_tap import CanTap, listen_only_plan, parse_ip_link_details
-from analyzer.sources.live import ERROR, INFO, WARNING, SourceEvent, TapQueue
+from analyzer.sources.live import ERROR, INFO, WARNING, TapQueue
 from decoders.model import CanFrame
 
 RETRY = 0.05
 REAL_BUS = can.Bus
 
 
-class Collector:
-    def __init__(self, q: TapQueue) -> None:
-        self.q = q
-        self.items: list[Item] = []
-        self.events: list[SourceEvent] = []
-
-    def pump(self, timeout: float = 0.02) -> None:
-        for x in self.q.get_batch(timeout=timeout):
-            if isinstance(x, SourceEvent):
-                self.events.append(x)
-            else:
-                self.items.append(x)
-
-    def wait(self, cond: Callable[[Collector], bool], timeout: float = 5.0) -> None:
-        end = time.monotonic() + timeout
-        while not cond(self):
-            if time.monotonic() > end:
-                kinds = [(e.kind, e.message) for e in self.events]
-                raise AssertionError(f"timed out; events so far: {kinds}")
-            self.pump()
-
-    def wait_event(self, kind: str, n: int = 1, timeout: float = 5.0) -> SourceEvent:
-        self.wait(lambda c: len(c.of(kind)) >= n, timeout)
-        return self.of(kind)[n - 1]
-
-    def of(self, kind: str) -> list[SourceEvent]:
-        return [e for e in self.events if e.kind == kind]
+class Collector(BaseCollector):
+    """The tap queue, drained; plus the captured CAN frames."""
 
     def frames(self) -> list[CanFrame]:
         out = []

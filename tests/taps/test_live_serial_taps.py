@@ -12,44 +12,18 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from tap_helpers import Collector as BaseCollector
 
 from analyzer.pipeline import Item
-from analyzer.sources.live import ERROR, INFO, WARNING, SourceEvent, TapQueue
+from analyzer.sources.live import ERROR, INFO, WARNING, TapQueue
 from analyzer.sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
 from decoders.model import Chunk
 
 RETRY = 0.05
 
 
-class Collector:
-    """Drains a TapQueue into items and events, waiting for conditions."""
-
-    def __init__(self, q: TapQueue) -> None:
-        self.q = q
-        self.items: list[Item] = []
-        self.events: list[SourceEvent] = []
-
-    def pump(self, timeout: float = 0.02) -> None:
-        for x in self.q.get_batch(timeout=timeout):
-            if isinstance(x, SourceEvent):
-                self.events.append(x)
-            else:
-                self.items.append(x)
-
-    def wait(self, cond: Callable[[Collector], bool], timeout: float = 5.0) -> None:
-        end = time.monotonic() + timeout
-        while not cond(self):
-            if time.monotonic() > end:
-                kinds = [(e.kind, e.message) for e in self.events]
-                raise AssertionError(f"timed out; events so far: {kinds}")
-            self.pump()
-
-    def wait_event(self, kind: str, n: int = 1, timeout: float = 5.0) -> SourceEvent:
-        self.wait(lambda c: len(c.of(kind)) >= n, timeout)
-        return self.of(kind)[n - 1]
-
-    def of(self, kind: str) -> list[SourceEvent]:
-        return [e for e in self.events if e.kind == kind]
+class Collector(BaseCollector):
+    """The tap queue, drained; plus the captured bytes per stream."""
 
     def data(self, stream: str | None = None) -> bytes:
         return b"".join(_chunk(i).data for i in self.items if stream is None or i.stream == stream)
