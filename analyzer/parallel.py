@@ -30,7 +30,7 @@ from typing import IO, Any
 from decoders.model import CanFrame, Chunk, Record
 
 from .pipeline import Decoding, Item
-from .sources.can_files import CandumpReader, _is_gzip
+from .sources.can_files import CandumpReader, is_gzip
 from .sources.capture import RawBytesReader, can_bus_name
 
 # Part sizes and warm-ups per kind of input. A candump log carries time: its warm-up covers
@@ -86,7 +86,7 @@ def splittable(path: Path, fmt: str, reader_kind: str) -> bool:
         or path.stat().st_size < MIN_PARALLEL_BYTES[reader_kind]
     ):
         return False
-    return reader_kind != "candump" or not _is_gzip(path)
+    return reader_kind != "candump" or not is_gzip(path)
 
 
 def _line_starts(path: Path, points: list[int]) -> list[int]:

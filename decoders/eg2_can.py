@@ -419,31 +419,7 @@ class Eg2CanDecoder:
                         memo.clear()
                     hit = memo[key] = _build_other(aid, data, tag)
                 tpl = hit
-            (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv) = tpl
-            return Record(
-                t,
-                self.bus,
-                pr,
-                FRAME,
-                n,
-                data,
-                None,
-                index,
-                di,
-                dv,
-                co,
-                na,
-                fi,
-                er.copy(),
-                wa.copy(),
-                su,
-                -1,
-                None,
-                None,
-                pk,
-                ex,
-                sv,
-            )
+            return _from_template(tpl, t, self.bus, n, data, index)
         except Exception as exc:  # a decoder bug must not stop a capture: show it on the frame
             raw = bytes(getattr(frame, "data", b"") or b"")
             return Record(
@@ -481,31 +457,7 @@ class Eg2CanDecoder:
             if len(memo) >= MEMO_LIMIT:
                 memo.clear()
             tpl = memo[key] = _build_foreign(frame, data, length, self.devices is not None)
-        (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv) = tpl
-        return Record(
-            frame.t,
-            self.bus,
-            pr,
-            FRAME,
-            length,
-            data,
-            None,
-            index,
-            di,
-            dv,
-            co,
-            na,
-            fi,
-            er.copy(),
-            wa.copy(),
-            su,
-            -1,
-            None,
-            None,
-            pk,
-            ex,
-            sv,
-        )
+        return _from_template(tpl, frame.t, self.bus, length, data, index)
 
 
 def _id_fields(aid: int, n: int) -> tuple[dict[str, Any], list[str]]:
@@ -755,3 +707,15 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
         False,
         False,
     )
+
+
+def _from_template(
+    tpl: Any, t: float | None, bus: str, length: int, data: bytes, index: int
+) -> Record:
+    """A Record from a memoised decode; positional, as this is the hot path, with fresh
+    errors/warnings lists (later stages append to them)."""
+    (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv) = tpl
+    return Record(
+        t, bus, pr, FRAME, length, data, None, index, di, dv, co, na, fi,
+        er.copy(), wa.copy(), su, -1, None, None, pk, ex, sv,
+    )  # fmt: skip

@@ -81,7 +81,7 @@ def message_to_frame(msg: can.Message) -> CanFrame:
     )
 
 
-def _is_gzip(path: Path) -> bool:
+def is_gzip(path: Path) -> bool:
     return path.suffix.lower() == ".gz"
 
 
@@ -137,7 +137,7 @@ class CandumpReader(_FileReaderBase):
         bounds must fall on line starts): the parallel decoder's parts."""
         super().__init__(path)
         self.bad_lines = 0
-        if _is_gzip(self.path):
+        if is_gzip(self.path):
             if byte_range is not None:
                 raise ValueError("a byte range of a compressed candump log cannot be read")
             self._file = gzip.open(self.path, "rb")  # noqa: SIM115
@@ -319,7 +319,7 @@ class PythonCanFileReader(_FileReaderBase):
             # text formats: a stray non-UTF-8 byte (a comment in a local code page) must not
             # end the file early
             text: dict[str, Any] = {} if binary else {"encoding": "utf-8", "errors": "replace"}
-            if _is_gzip(self.path):
+            if is_gzip(self.path):
                 mode = "rb" if binary else "rt"
                 self._file = gzip.open(self.path, mode, **text)  # noqa: SIM115
             else:
@@ -377,7 +377,7 @@ class PythonCanFileReader(_FileReaderBase):
     def _check_blf(self) -> None:
         reader = self._reader
         stated = int(getattr(reader, "file_size", 0) or 0)
-        if _is_gzip(self.path):
+        if is_gzip(self.path):
             return  # the header states the uncompressed size; nothing to compare against
         actual = self.path.stat().st_size
         header_size = 144  # BLF file header (FILE_HEADER_SIZE)
