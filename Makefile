@@ -15,8 +15,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	@touch $(STAMP)
 
+# the TUI on a terminal; today's text output when stdout is not one (CI, pipes)
 demo: venv
-	$(BIN)/eg2scope demo
+	@if [ -t 1 ]; then $(BIN)/eg2scope tui --demo; else $(BIN)/eg2scope demo; fi
 
 lint: venv
 	$(BIN)/ruff check .

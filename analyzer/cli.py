@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from collections.abc import Sequence
 
 from . import __version__
 from .commands import SUBCOMMANDS
+from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,12 +21,18 @@ def build_parser() -> argparse.ArgumentParser:
             "gripper: the regular serial protocol (RS232), Modbus RTU (RS485) and the CAN "
             "register protocol. Decodes captures and live buses into words."
         ),
-        epilog="Run 'eg2scope COMMAND --help' for the options of one command.",
+        epilog=(
+            "Run 'eg2scope COMMAND --help' for the options of one command.\n\n"
+            "exit status: 0 done; 1 error (a file or device that cannot be read or written); "
+            "2 usage error; 3 decoded as far as possible, but the input is damaged; "
+            "130 interrupted (Ctrl-C)"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"eg2scope {__version__}")
     sub = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND")
-    for module in SUBCOMMANDS:
-        module.add_subparser(sub)
+    for name in SUBCOMMANDS:
+        importlib.import_module(f"{__package__}.commands.{name}").add_subparser(sub)
     return parser
 
 
@@ -35,14 +43,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # a pipe closed early shows here, not at interpreter exit
+        return code
     except KeyboardInterrupt:
-        return 130
+        print("eg2scope: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         # output piped into `head` and the like: stop quietly, as Unix tools do
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except UsageError as exc:
+        parser.exit(EXIT_USAGE, f"eg2scope: error: {exc}\n")
     except (OSError, ValueError) as exc:
         print(f"eg2scope: error: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_ERROR
+    return EXIT_ERROR  # not reached: parser.exit raises SystemExit

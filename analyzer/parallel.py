@@ -1,37 +1,54 @@
 """Decoding a large capture file on every core: parts decoded in parallel, joined in order.
 
 The decode path is sequential by nature (framing state, pending requests, timing rules), but
-that state only reaches back a bounded way. Each worker decodes one part of the file, starting
-``WARMUP`` bytes early and running ``WARMUP`` bytes past its end, so that framing, the CAN
-direction table, pairing and the timing linter are in the same state as in a one-piece decode;
-it keeps only the records that start inside its part. Records are numbered by their place in
-the input (``seq`` = offset, or CAN frame index), the same in every worker.
+that state only reaches back a bounded way. Each worker runs the session's own stages (Decoding,
+Tracker, the JSONL or CSV listener) over one part of the file, starting ``WARMUP`` bytes early and
+running ``WARMUP`` bytes past its end, so that framing, the CAN direction table, pairing and the
+timing linter are in the same state as in a one-piece decode; it keeps only the records that start
+inside its part. Records are numbered by their place in the input (``seq`` = offset, or CAN frame
+index), the same in every worker.
 
-The joins are checked: consecutive parts must meet exactly (byte streams: the last record of
-one part ends where the next part's first record starts; CAN: frame indices follow on). If a
-join does not hold (a garbage run or a pending request longer than the warm-up, a malformed
-candump line), the caller decodes the file in one piece instead. Only raw byte dumps and
-uncompressed candump logs are split; everything else is decoded in one piece.
+The joins are checked on the state that matters, and any doubt means one piece:
+- a part's own records must all be decided inside its overrun: a request of the part still waiting
+  for its answer, or bytes of the part still undecided, when the overrun ends -> one piece;
+- the records a part decoded in its overrun must equal, one for one, the first records the next
+  part decoded after its warm-up (so the next part's warm-up reached the same state);
+- consecutive parts must meet exactly (no record lost or doubled at the boundary).
+Only raw byte dumps and uncompressed candump logs are split; everything else is one piece.
 """
 
 from __future__ import annotations
 
-import argparse
 import gc
+import io
 import multiprocessing
 import os
 import shutil
+import signal
+import sys
 import tempfile
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
-from decoders.model import CanFrame, Chunk, Record
+import orjson
 
-from .pipeline import Decoding, Item
+from decoders.model import EG2_SERIAL, CanFrame, Chunk, Record
+from decoders.registry import detect_protocol
+
+from .errors import EXIT_OK
+from .listener import Listener
+from .model import Item
+from .pipeline import Decoding
 from .sources.can_files import CandumpReader, is_gzip
 from .sources.capture import RawBytesReader, can_bus_name
+from .tracker import Tracker
+
+if TYPE_CHECKING:
+    from .commands.common import CaptureOptions
+    from .sources.capture import CaptureReader
 
 # Part sizes and warm-ups per kind of input. A candump log carries time: its warm-up covers
 # the longest a request may wait for its answer (a save, 2 s) on a busy bus. A raw dump has
@@ -42,24 +59,20 @@ PARTS_PER_WORKER = 2  # few parts: each costs a warm-up; two per worker keep bot
 WARMUP = {"candump": 1 << 20, "bytes": 64 << 10}
 MIN_PARALLEL_BYTES = {"candump": 8 << 20, "bytes": 2 << 20}  # smaller: one piece
 READ = 1 << 16
+BATCH = 4096
 
 
 class JoinError(Exception):
     """Two parts did not meet exactly: decode in one piece instead."""
 
 
-@dataclass
-class Part:
+@dataclass(frozen=True)
+class PartJob:
+    """What every worker is told: the file, how to decode and what to keep."""
+
     path: str
     kind: str  # "bytes" or "candump"
-    lo: int  # the part: records starting in [lo, hi)
-    hi: int
-    warm_lo: int  # decoded: [warm_lo, cool_hi)
-    cool_hi: int
     size: int
-    can_index: int  # frame index of the first line at warm_lo (candump)
-    index_lo: int  # frame indices of the part itself (candump): [index_lo, index_hi)
-    index_hi: int
     protocol: str | None
     bus: str | None
     fmt: str
@@ -68,25 +81,49 @@ class Part:
     tmpdir: str
 
 
+@dataclass(frozen=True)
+class Part:
+    job: PartJob
+    lo: int  # the part: records starting in [lo, hi) (bytes) ...
+    hi: int
+    warm_lo: int  # decoded: [warm_lo, cool_hi)
+    cool_hi: int
+    can_index: int  # frame index of the first line at warm_lo (candump)
+    index_lo: int  # ... or with frame indices in [index_lo, index_hi) (candump)
+    index_hi: int
+
+
 @dataclass
 class PartResult:
     out_path: str
-    first: int | None  # first record's offset (bytes) or index (CAN), before filtering
-    end: int | None  # offset after the last record, or last index + 1
+    first: int | None  # first record's position (offset, or CAN index), before filtering
+    end: int | None  # position after the last record (offset + length, or index + 1)
     records: int
-    errors: list[str]
+    # (position, crc32 of the record's JSON) for the records past the part's end that the
+    # overrun decided, and for the part's first records after its warm-up: the join check
+    overrun: list[tuple[int, int]] = field(default_factory=list)
+    head: list[tuple[int, int]] = field(default_factory=list)
 
 
-def splittable(path: Path, fmt: str, reader_kind: str) -> bool:
+def splittable(path: Path, fmt: str, kind: str) -> bool:
     """Worth and possible to split: large raw dumps and candump logs, JSONL or CSV out."""
     if fmt not in ("jsonl", "csv") or (os.cpu_count() or 1) < 2:
         return False
-    if (
-        reader_kind not in MIN_PARALLEL_BYTES
-        or path.stat().st_size < MIN_PARALLEL_BYTES[reader_kind]
-    ):
+    if kind not in MIN_PARALLEL_BYTES or path.stat().st_size < MIN_PARALLEL_BYTES[kind]:
         return False
-    return reader_kind != "candump" or not is_gzip(path)
+    return kind != "candump" or not is_gzip(path)
+
+
+def reader_kind(reader: Any) -> str:
+    """ "bytes", "candump" or "" (not splittable) for a capture reader."""
+    if isinstance(reader, RawBytesReader):
+        return "bytes"
+    if isinstance(getattr(reader, "_reader", None), CandumpReader):
+        return "candump"
+    return ""
+
+
+# -- planning --------------------------------------------------------------------------------
 
 
 def _line_starts(path: Path, points: list[int]) -> list[int]:
@@ -122,8 +159,8 @@ def _frame_lines_before(path: Path, points: list[int]) -> list[int]:
     return [counts[p] for p in points]
 
 
-def plan(path: Path, kind: str, base: dict[str, Any], workers: int = 2) -> list[Part]:
-    size = path.stat().st_size
+def plan(job: PartJob, workers: int = 2) -> list[Part]:
+    path, kind, size = Path(job.path), job.kind, job.size
     step = max(PART_BYTES[kind], min(PART_MAX, -(-size // (workers * PARTS_PER_WORKER))))
     cuts = list(range(0, size, step))[1:]
     if kind == "candump":
@@ -140,38 +177,35 @@ def plan(path: Path, kind: str, base: dict[str, Any], workers: int = 2) -> list[
     else:
         indices, at_bounds = [0] * n, [0] * (n + 1)
     return [
-        Part(
-            str(path),
-            kind,
-            bounds[i],
-            bounds[i + 1],
-            warm[i],
-            cool[i],
-            size,
-            indices[i],
-            at_bounds[i],
-            at_bounds[i + 1],
-            **base,
-        )
+        Part(job, bounds[i], bounds[i + 1], warm[i], cool[i], indices[i], at_bounds[i],
+             at_bounds[i + 1])
         for i in range(n)
-    ]
+    ]  # fmt: skip
 
 
-def _items(part: Part) -> Iterator[Item]:
-    """A raw dump's part (with its warm-up and overrun) as chunks."""
-    bus = part.bus or "serial"
-    with open(part.path, "rb") as f:
+# -- one worker --------------------------------------------------------------------------------
+
+
+def _byte_items(part: Part) -> Iterator[Item]:
+    """A raw dump's part (with its warm-up and overrun) as chunks that end exactly at the part's
+    end, so the decoding's state there can be checked."""
+    bus = part.job.bus or "serial"
+    with open(part.job.path, "rb") as f:
         f.seek(part.warm_lo)
-        left = part.cool_hi - part.warm_lo
-        while left > 0 and (data := f.read(min(READ, left))):
-            left -= len(data)
+        pos = part.warm_lo
+        while pos < part.cool_hi:
+            stop = part.hi if pos < part.hi else part.cool_hi
+            data = f.read(min(READ, stop - pos))
+            if not data:
+                return
+            pos += len(data)
             yield Item(bus, Chunk(data))
 
 
 def _can_frames(part: Part) -> Iterator[tuple[str, CanFrame]]:
     """A candump log's part (with its warm-up and overrun) as (bus, frame)."""
-    reader = CandumpReader(part.path, (part.warm_lo, part.cool_hi))
-    fixed = part.bus
+    reader = CandumpReader(part.job.path, (part.warm_lo, part.cool_hi))
+    fixed = part.job.bus
     names: dict[str | None, str] = {}
     for frame in reader:
         name = fixed or names.get(frame.channel)
@@ -183,143 +217,213 @@ def _can_frames(part: Part) -> Iterator[tuple[str, CanFrame]]:
         raise JoinError("; ".join(reader.errors[:3]))
 
 
-def _writer(fmt: str, out: IO[bytes]) -> Callable[[list[Record]], None]:
+def _output(fmt: str, out: IO[bytes]) -> Listener:
     if fmt == "jsonl":
-        from .sinks.jsonl import JsonlSink
+        from .sinks.jsonl import JsonlListener
 
-        return JsonlSink(out).write
-    import io
+        return JsonlListener(out)
+    from .sinks.csv import CsvListener
 
-    from .sinks.csv import CsvSink
-
-    text = io.TextIOWrapper(out, encoding="utf-8", newline="")
-    sink = CsvSink(text, header=False)
-
-    def write(records: list[Record]) -> None:
-        sink.write(records)
-        text.flush()
-
-    return write
+    return CsvListener(io.TextIOWrapper(out, encoding="utf-8", newline=""), header=False)
 
 
-def decode_part(part: Part) -> PartResult:
-    """Worker: decode a part with warm-up, write its records to a temp file."""
-    gc.disable()  # records hold no cycles (see commands.common.batch_gc)
-    decoding = Decoding(
-        part.protocol, positional_seq=True, start_offset=part.warm_lo, can_index=part.can_index
-    )
-    at_end = part.cool_hi >= part.size
-    is_bytes = part.kind == "bytes"
-    lo, hi = part.lo, part.hi
-    first: int | None = None
-    end: int | None = None
-    count = 0
-    fd, out_path = tempfile.mkstemp(dir=part.tmpdir, suffix=f".{part.fmt}")
-    device, errors_only = part.device, part.errors_only
-    with os.fdopen(fd, "wb") as out:
-        write = _writer(part.fmt, out)
+def _position(rec: Record) -> int:
+    return rec.offset if rec.offset is not None else (rec.index or 0)
 
-        def take(records: list[Record]) -> None:
-            nonlocal first, end, count
-            if not records:
-                return
-            if is_bytes:
-                mine = [r for r in records if r.offset is not None and lo <= r.offset < hi]
-                if mine:
-                    if first is None:
-                        first = mine[0].offset
-                    last = mine[-1]
-                    end = (last.offset or 0) + last.length
-            else:
-                ilo, ihi = part.index_lo, part.index_hi
-                mine = [r for r in records if r.index is not None and ilo <= r.index < ihi]
-                if mine:
-                    if first is None:
-                        first = mine[0].index
-                    end = (mine[-1].index or 0) + 1
-            count += len(mine)
-            if device is not None or errors_only:
+
+def _digest(rec: Record) -> tuple[int, int]:
+    return _position(rec), zlib.crc32(orjson.dumps(rec.to_dict()))
+
+
+class _PartDecoder:
+    """The session's stages over one part: Decoding -> Tracker -> the output listener."""
+
+    def __init__(self, part: Part, out: IO[bytes]) -> None:
+        self.part = part
+        job = part.job
+        self.decoding = Decoding(
+            job.protocol, positional_seq=True, start_offset=part.warm_lo, can_index=part.can_index
+        )
+        self.tracker = Tracker()
+        self.output = _output(job.fmt, out)
+        if job.kind == "bytes":
+            self.lo, self.hi = part.lo, part.hi
+        else:
+            self.lo, self.hi = part.index_lo, part.index_hi
+        self.result = PartResult("", None, None, 0)
+        self.head_limit = self.lo + (WARMUP[job.kind] if job.kind == "bytes" else 1 << 30)
+
+    def take(self, records: list[Record], final: bool = False) -> None:
+        if not records:
+            return
+        self.tracker.update_many(records)  # the Tracker runs on every path
+        lo, hi, res = self.lo, self.hi, self.result
+        mine = [r for r in records if lo <= _position(r) < hi]
+        if not final:
+            res.overrun += [_digest(r) for r in records if _position(r) >= hi]
+        if mine:
+            if res.first is None:
+                res.first = _position(mine[0])
+                if lo > 0:
+                    res.head = [_digest(r) for r in mine[:BATCH]]
+            last = mine[-1]
+            res.end = (
+                (last.offset + last.length) if last.offset is not None else _position(last) + 1
+            )
+            res.records += len(mine)
+            job = self.part.job
+            if job.device is not None or job.errors_only:
                 mine = [
                     r
                     for r in mine
-                    if (device is None or r.device == device)
-                    and (not errors_only or r.errors or r.warnings)
+                    if (job.device is None or r.device == job.device)
+                    and (not job.errors_only or r.errors or r.warnings)
                 ]
-            write(mine)
+            self.output.on_records(mine)
 
+    def check_end(self) -> None:
+        """At the end of the overrun nothing of the part may still be undecided."""
+        undecided = self.decoding.undecided_before(self.hi)
+        if undecided:
+            raise JoinError(f"part ending at {self.part.hi}: {undecided} at the end of its overrun")
+
+
+def decode_part(part: Part) -> PartResult:
+    """Worker: decode a part with warm-up and overrun, write its records to a temp file."""
+    gc.disable()  # records hold no cycles (see commands.common.batch_gc)
+    fd, out_path = tempfile.mkstemp(dir=part.job.tmpdir, suffix=f".{part.job.fmt}")
+    at_end = part.cool_hi >= part.job.size
+    with os.fdopen(fd, "wb") as out:
+        worker = _PartDecoder(part, out)
+        decoding = worker.decoding
         batch: list[Record] = []
-        if is_bytes:
-            for item in _items(part):
+        if part.job.kind == "bytes":
+            for item in _byte_items(part):
                 batch += decoding.feed(item)
-                if len(batch) >= 4096:
-                    take(batch)
+                if len(batch) >= BATCH:
+                    worker.take(batch)
                     batch = []
         else:
             feed_can = decoding.feed_can
             for bus, frame in _can_frames(part):
                 batch += feed_can(bus, frame)
-                if len(batch) >= 4096:
-                    take(batch)
+                if len(batch) >= BATCH:
+                    worker.take(batch)
                     batch = []
-        batch += decoding.finish() if at_end else _flush_without_end(decoding)
-        take(batch)
-    return PartResult(out_path, first, end, count, [])
+        worker.take(batch)
+        if at_end:
+            worker.take(decoding.finish(), final=True)
+        else:
+            worker.check_end()
+            worker.take(decoding.pairer.flush(), final=True)
+        worker.output.close()
+    worker.result.out_path = out_path
+    return worker.result
 
 
-def _flush_without_end(decoding: Decoding) -> list[Record]:
-    """The part's overrun is decoded; release what the pairing stage still holds without
-    deciding the bytes after it (they belong to the next part)."""
-    return decoding.pairer.flush()
+def _worker_init() -> None:
+    # Ctrl-C goes to the whole process group: the parent alone reports it, once
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# -- the parent --------------------------------------------------------------------------------
+
+
+def _check_join(prev: PartResult, res: PartResult, part: Part) -> None:
+    if prev.end is not None and res.first is not None and prev.end != res.first:
+        raise JoinError(f"parts do not meet at {part.lo}: {prev.end} != {res.first}")
+    n = min(len(prev.overrun), len(res.head))
+    if prev.overrun[:n] != res.head[:n]:
+        raise JoinError(f"the part from {part.lo} decoded its first records differently")
 
 
 def run_parallel(
-    path: Path,
-    kind: str,
-    args: argparse.Namespace,
-    protocol: str | None,
-    out: IO[bytes],
-    progress: Callable[[int, int], None],
-    jobs: int = 0,
+    job: PartJob, out: IO[bytes], progress: Any, jobs: int = 0, header: bytes = b""
 ) -> int:
-    """Decode in parts on every core, then write the joined output to ``out``. Returns the
-    number of records. Raises JoinError, having written nothing, when parts do not meet."""
-    with tempfile.TemporaryDirectory(prefix="eg2scope-") as tmpdir:
-        base = {
-            "protocol": protocol,
-            "bus": args.bus,
-            "fmt": args.format,
-            "device": args.device,
-            "errors_only": args.errors_only,
-            "tmpdir": tmpdir,
-        }
-        workers = max(1, jobs or os.cpu_count() or 2)
-        parts = plan(path, kind, base, workers)
-        ctx = multiprocessing.get_context("fork")
-        results: list[PartResult] = []
-        workers = min(workers, len(parts))
-        with ctx.Pool(workers) as pool:
+    """Decode in parts on every core, then write ``header`` and the joined output to ``out``.
+    Returns the number of records. Raises JoinError, having written nothing, when parts do not
+    meet."""
+    workers = max(1, jobs or os.cpu_count() or 2)
+    parts = plan(job, workers)
+    ctx = multiprocessing.get_context("fork")
+    results: list[PartResult] = []
+    with ctx.Pool(min(workers, len(parts)), initializer=_worker_init) as pool:
+        try:
             for part, res in zip(parts, pool.imap(decode_part, parts), strict=True):
                 if results:
-                    prev = results[-1]
-                    if prev.end is not None and res.first is not None and prev.end != res.first:
-                        raise JoinError(
-                            f"parts do not meet at {part.lo}: {prev.end} != {res.first}"
-                        )
+                    _check_join(results[-1], res, part)
                 results.append(res)
-                progress(part.hi, part.size)
-        total = 0
-        for res in results:
-            with open(res.out_path, "rb") as f:
-                shutil.copyfileobj(f, out, 1 << 20)
-            total += res.records
-        return total
+                progress(part.hi)
+        except BaseException:
+            pool.terminate()
+            raise
+    out.write(header)
+    total = 0
+    for res in results:
+        with open(res.out_path, "rb") as f:
+            shutil.copyfileobj(f, out, 1 << 20)
+        total += res.records
+    return total
 
 
-def reader_kind(reader: Any) -> str:
-    """ "bytes", "candump" or "" (not splittable) for a capture reader."""
-    if isinstance(reader, RawBytesReader):
-        return "bytes"
-    inner = getattr(reader, "_reader", None)
-    if isinstance(inner, CandumpReader):
-        return "candump"
-    return ""
+def decode_in_parallel(
+    opts: CaptureOptions, fmt: str, jobs: int, reader: CaptureReader, out: IO[Any]
+) -> int | None:
+    """Large raw dumps and candump logs, to JSONL or CSV: decode on every core and return the
+    exit code. None when the file is not split (the caller decodes it in one piece)."""
+    from .commands.common import byte_protocol
+
+    path = Path(opts.path)
+    kind = reader_kind(reader)
+    if opts.speed is not None or jobs == 1 or not kind or not splittable(path, fmt, kind):
+        return None
+    protocol = byte_protocol(opts)
+    if kind == "bytes" and protocol is None:
+        with path.open("rb") as f:
+            protocol = detect_protocol(f.read(4096)) or EG2_SERIAL
+    binary: IO[bytes] = out if fmt == "jsonl" else out.buffer  # type: ignore[attr-defined]
+    header = b""
+    if fmt == "csv":
+        from .sinks.csv import CsvListener
+
+        text = io.StringIO()
+        CsvListener(text)  # writes the header
+        header = text.getvalue().encode()
+    out.flush()
+    with tempfile.TemporaryDirectory(prefix="eg2scope-") as tmpdir:
+        job = PartJob(
+            str(path), kind, path.stat().st_size, protocol, opts.bus, fmt, opts.device,
+            opts.errors_only, tmpdir,
+        )  # fmt: skip
+        try:
+            with _PartProgress(reader, opts.progress) as progress:
+                run_parallel(job, binary, progress, jobs, header)
+        except JoinError as exc:
+            print(f"eg2scope: decoding {path.name} in one piece ({exc})", file=sys.stderr)
+            return None
+    binary.flush()
+    return EXIT_OK
+
+
+class _PartProgress:
+    """The capture's progress bar, moved by finished parts (terminals only)."""
+
+    def __init__(self, reader: CaptureReader, enabled: bool) -> None:
+        self.bar: Any = None
+        self.reader = reader
+        if enabled and sys.stderr.isatty():
+            from .commands.common import ProgressListener
+
+            self.bar = ProgressListener(reader)
+
+    def __enter__(self) -> Any:
+        def progress(done: int) -> None:
+            if self.bar is not None:
+                self.reader.position = done
+                self.bar.tick(0.0)
+
+        return progress
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.close()

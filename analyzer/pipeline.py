@@ -8,7 +8,6 @@ the same input gives the same records whether it comes live or from a file.
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
 
 from decoders.eg2_can import Eg2CanDecoder
 from decoders.framing import ByteStreamDecoder
@@ -17,20 +16,9 @@ from decoders.model import EG2_SERIAL, CanFrame, Chunk, Record
 from decoders.pairing import Pairer
 from decoders.registry import STREAM_DECODERS, detect_protocol
 
+from .model import Item, SourceEvent
+
 DETECT_BYTES = 4096  # bytes of a stream looked at before choosing its protocol
-
-
-@dataclass(slots=True)
-class Item:
-    """One unit of source input: a chunk of one byte stream, or one CAN frame.
-
-    ``stream`` separates byte streams on one bus that must be framed apart (the two wires of
-    an RS232 line tapped with two adapters); records still carry ``bus``, so pairing joins them.
-    """
-
-    bus: str
-    payload: Chunk | CanFrame
-    stream: str = ""
 
 
 class Decoding:
@@ -44,12 +32,15 @@ class Decoding:
         positional_seq: bool = False,
         start_offset: int = 0,
         can_index: int = 0,
+        byte_time_s: dict[str, float] | None = None,
     ) -> None:
         """``positional_seq``: seq is each record's offset or CAN index (single-stream
         captures); ``start_offset``/``can_index``: where the input starts in a larger capture
-        (the parallel decoder's parts)."""
+        (the parallel decoder's parts); ``byte_time_s``: seconds per byte of live serial buses,
+        so frames that arrive in one read get their own times."""
         self.protocol = protocol
         self.per_bus = per_bus or {}
+        self.byte_time_s = byte_time_s or {}
         self.linter = TimingLinter()
         self.pairer = Pairer(positional=positional_seq)
         self.start_offset = start_offset
@@ -78,9 +69,11 @@ class Decoding:
         self.linter.check(rec)
         return self.pairer.push(rec)
 
-    def feed_many(self, items: Iterable[Item]) -> Iterator[Record]:
+    def feed_many(self, items: Iterable[Item | SourceEvent]) -> Iterator[Record]:
+        """Every record of ``items`` (source events among them are passed over)."""
         for item in items:
-            yield from self.feed(item)
+            if type(item) is Item:
+                yield from self.feed(item)
         yield from self.finish()
 
     def tick(self, now: float) -> list[Record]:
@@ -107,6 +100,27 @@ class Decoding:
         out = self._post(records)
         return out + self.pairer.flush()
 
+    def gap(self, bus: str) -> list[Record]:
+        """The bus's source went away (a port lost, a tap closed): the bytes held for a frame
+        that had begun will not be completed, so decide them now, before the gap is shown."""
+        records: list[Record] = []
+        for (name, _), dec in self._streams.items():
+            if name == bus:
+                records += dec.finish()
+        return self._post(records) + self.pairer.gap(bus)
+
+    def undecided_before(self, position: int) -> str:
+        """What the decoding still holds undecided from before ``position`` (a byte offset, or a
+        CAN frame index): '' when everything before it is decided. The parallel decoder's check
+        that a part ended in the same state as a one-piece decode would be in."""
+        for dec in self._streams.values():
+            held = dec.held_from()
+            if held is not None and held < position:
+                return f"bytes from offset {held} still undecided"
+        if self.pairer.waiting_before(position):
+            return "a request still waiting for its answer"
+        return ""
+
     # -- internals -------------------------------------------------------------------------
 
     def _decode_can(self, bus: str, frame: CanFrame) -> Record:
@@ -132,7 +146,9 @@ class Decoding:
         return detect_protocol(sample) or EG2_SERIAL
 
     def _new_stream_decoder(self, key: tuple[str, str], protocol: str) -> ByteStreamDecoder:
-        dec = STREAM_DECODERS[protocol](key[0])
+        byte_time = self.byte_time_s.get(key[0])
+        cls = STREAM_DECODERS[protocol]
+        dec = cls(key[0]) if byte_time is None else cls(key[0], byte_time_s=byte_time)
         dec.start_at(self.start_offset)
         self._streams[key] = dec
         self.detected.setdefault(key[0], protocol)

@@ -7,20 +7,16 @@ HdrHistogram does) so that a capture of any length needs the same memory; the ma
 from __future__ import annotations
 
 import math
-import re
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+from decoders.flags import RETRANSMISSION, UNANSWERED
 from decoders.model import FRAME, GARBAGE, REQUEST, RESPONSE, TRUNCATED, Record
 
+from .model import SourceEvent
+
 _LOG_STEP = math.log(1.01)
-_NUMBER = re.compile(r"0x[0-9A-Fa-f]+|-?\d+(\.\d+)?")
-
-
-def unanswered(rec: Record) -> bool:
-    """The pairing stage flagged this request as never answered."""
-    return any(w.startswith("no response") for w in rec.warnings)
 
 
 class LatencyHistogram:
@@ -61,6 +57,7 @@ class Counts:
     requests: int = 0
     responses: int = 0
     unanswered: int = 0
+    retransmissions: int = 0
     errors: int = 0
     warnings: int = 0
     latency: LatencyHistogram = field(default_factory=LatencyHistogram)
@@ -68,8 +65,11 @@ class Counts:
     def add(self, rec: Record) -> None:
         if rec.direction == REQUEST:
             self.requests += 1
-            if unanswered(rec):
+            flags = rec.flags
+            if UNANSWERED in flags:
                 self.unanswered += 1
+            if RETRANSMISSION in flags:
+                self.retransmissions += 1
         elif rec.direction == RESPONSE:
             self.responses += 1
             if rec.latency_ms is not None:
@@ -84,18 +84,11 @@ class Counts:
             "requests": self.requests,
             "responses": self.responses,
             "unanswered": self.unanswered,
+            "retransmissions": self.retransmissions,
             "errors": self.errors,
             "warnings": self.warnings,
             **self.latency.summary(),
         }
-
-
-def warning_kind(text: str) -> str:
-    """Group errors and warnings by their wording: the words before any detail (':' or
-    '('), with numbers taken out ("speed out of range", "command N ms after a parameter
-    save")."""
-    head = re.split(r"[:(]", text, maxsplit=1)[0].strip()
-    return _NUMBER.sub("N", head or text)
 
 
 class CaptureStats:
@@ -108,8 +101,8 @@ class CaptureStats:
         self.by_protocol: Counter[str] = Counter()
         self.devices: dict[tuple[str, str, int], Counts] = {}
         self.commands: dict[tuple[str, str, int, str], Counts] = {}
-        self.errors: Counter[str] = Counter()
-        self.warnings: Counter[str] = Counter()
+        self.flags: Counter[str] = Counter()
+        self.events: Counter[str] = Counter()
         self.unanswered_ids: dict[tuple[str, str], set[int]] = {}
         self.first_t: float | None = None
         self.last_t: float | None = None
@@ -129,10 +122,8 @@ class CaptureStats:
             self.frames += 1
             if not rec.errors:
                 self.valid += 1
-        for e in rec.errors:
-            self.errors[warning_kind(e)] += 1
-        for w in rec.warnings:
-            self.warnings[warning_kind(w)] += 1
+        if rec.flags:
+            self.flags.update(rec.flags)
         if rec.device is None or rec.kind != FRAME:
             return
         dev_key = (rec.bus, rec.protocol, rec.device)
@@ -145,8 +136,11 @@ class CaptureStats:
         if cmd is None:
             cmd = self.commands[cmd_key] = Counts()
         cmd.add(rec)
-        if rec.direction == REQUEST and unanswered(rec):
+        if rec.direction == REQUEST and UNANSWERED in rec.flags:
             self.unanswered_ids.setdefault((rec.bus, rec.protocol), set()).add(rec.device)
+
+    def add_event(self, event: SourceEvent) -> None:
+        self.events[event.kind] += event.count
 
     def scans(self) -> list[str]:
         """Unanswered requests to many different IDs: a host scanning for devices."""
@@ -179,7 +173,7 @@ class CaptureStats:
                 {"bus": b, "protocol": p, "device": d, "name": n, **c.as_dict()}
                 for (b, p, d, n), c in sorted(self.commands.items())
             ],
-            "errors": dict(self.errors.most_common()),
-            "warnings": dict(self.warnings.most_common()),
+            "flags": dict(self.flags.most_common()),
+            "events": dict(self.events.most_common()),
             "notes": self.scans(),
         }

@@ -1,22 +1,27 @@
-"""One state per gripper, folded from the records of any protocol.
+"""One state per gripper, folded from the records of any protocol, one sample per reading.
 
-The device panel, the Rerun timelines and the MCAP ``/state`` topics all read DeviceState.
-Only valid frames count; values outside their documented range are not folded in (they are
-flagged on the record instead), so one corrupt reading does not spike a plot.
+``Tracker.update(record)`` folds a record into its gripper's ``DeviceState`` and returns a
+``StateSample`` when the record set anything (a reading, a setpoint, a command): the device panel,
+the Rerun timelines and the MCAP ``/state`` topics all read the samples, so every reading keeps its
+own time and nothing is downsampled. Only valid frames set values; a value outside its documented
+range is not folded in (it is flagged on the record instead), so one corrupt reading does not spike
+a plot. Counters (frames, errors, unanswered) move on every frame but are not readings.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-from typing import Any
+from collections.abc import Callable
+from typing import Any, Final
 
+from decoders.eg2_serial import Cmd
+from decoders.flags import UNANSWERED
 from decoders.model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
-from decoders.registers import BY_NAME, fault_text, opening_mm, state_text
+from decoders.registers import BY_NAME
 
-from .stats import unanswered
+from .model import StateSample, derived
 
-# register name -> DeviceState attribute
-REGISTER_FIELDS: dict[str, str] = {
+# register name -> state field
+REGISTER_FIELDS: Final[dict[str, str]] = {
     "CMD_OPENLEN_SET": "target_opening",
     "CMD_SPEED_SET": "speed",
     "CMD_FORCE_SET": "force_setting",
@@ -31,117 +36,197 @@ REGISTER_FIELDS: dict[str, str] = {
     "CMD_STATUS": "state",
 }
 
+# the state fields, in the order they are shown and recorded
+READINGS: Final = ("opening", "force", "current", "temperature_c", "state", "fault")
+SETTINGS: Final = (
+    "target_opening",
+    "speed",
+    "force_setting",
+    "catch_mode",
+    "max_opening",
+    "min_opening",
+)
+COUNTERS: Final = ("frames", "errors", "unanswered")
+VALUE_KEYS: Final = (*READINGS, *SETTINGS, "last_command", "latency_ms", *COUNTERS)
 
-@dataclass
+# serial run-state response key -> state field
+_RUN_STATE: Final = (
+    ("state", "state"),
+    ("fault", "fault"),
+    ("temperature_c", "temperature_c"),
+    ("position", "opening"),
+    ("force_setting_g", "force_setting"),
+)
+
+
 class DeviceState:
-    bus: str
-    device: int
-    protocol: str
-    t: float | None = None
-    opening: int | None = None  # 0-1000
-    force: int | None = None  # measured
-    current: int | None = None
-    temperature_c: int | None = None
-    state: int | None = None
-    fault: int | None = None
-    target_opening: int | None = None
-    speed: int | None = None
-    force_setting: int | None = None
-    catch_mode: int | None = None
-    max_opening: int | None = None
-    min_opening: int | None = None
-    last_command: str | None = None
-    frames: int = 0
-    errors: int = 0
-    unanswered: int = 0
-    latency_ms: float | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    """The last known state of one gripper on one bus. ``values`` holds every field of
+    ``VALUE_KEYS`` (None until known); ``t`` is when it was last heard."""
+
+    __slots__ = ("bus", "device", "protocol", "t", "values")
+
+    def __init__(self, bus: str, device: int, protocol: str) -> None:
+        self.bus = bus
+        self.device = device
+        self.protocol = protocol
+        self.t: float | None = None
+        self.values: dict[str, Any] = dict.fromkeys(VALUE_KEYS)
+        for key in COUNTERS:
+            self.values[key] = 0
+
+    def __getattr__(self, name: str) -> Any:
+        # state.opening, state.frames ... read the values (only called for missing attributes)
+        try:
+            return self.__getattribute__("values")[name]
+        except KeyError:
+            raise AttributeError(name) from None
 
     def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["opening_mm"] = None if self.opening is None else opening_mm(self.opening)
-        d["target_mm"] = None if self.target_opening is None else opening_mm(self.target_opening)
-        d["state_text"] = None if self.state is None else state_text(self.state)
-        d["fault_text"] = [] if self.fault is None else fault_text(self.fault)
-        return d
+        """The whole state, flat, with millimetres and words (as a StateSample's)."""
+        d: dict[str, Any] = {
+            "t": self.t,
+            "bus": self.bus,
+            "device": self.device,
+            "protocol": self.protocol,
+        }
+        d.update(self.values)
+        return derived(d)
 
 
 class Tracker:
-    """Folds records into DeviceStates; ``update`` returns the state a record changed."""
+    """Folds records into DeviceStates; ``update`` returns the sample a record made, if any.
+    ``samples=False``: fold only (no listener reads samples; the states are still kept)."""
 
-    def __init__(self) -> None:
+    def __init__(self, samples: bool = True) -> None:
         self.states: dict[tuple[str, int], DeviceState] = {}
+        self.samples = samples
 
-    def update(self, rec: Record) -> DeviceState | None:
+    def update(self, rec: Record) -> StateSample | None:
         if rec.kind != FRAME or rec.device is None:
             return None
         key = (rec.bus, rec.device)
         st = self.states.get(key)
         if st is None:
             st = self.states[key] = DeviceState(rec.bus, rec.device, rec.protocol)
-        st.frames += 1
+        values = st.values
+        values["frames"] += 1
         if rec.t is not None:
             st.t = rec.t
         if rec.errors:
-            st.errors += 1
-            return st
+            values["errors"] += 1
+            return None
+        changed: dict[str, Any] = {}
         if rec.direction == REQUEST:
-            st.last_command = rec.summary or rec.name
-            if unanswered(rec):
-                st.unanswered += 1
+            changed["last_command"] = rec.summary or rec.name
+            if UNANSWERED in rec.flags:
+                values["unanswered"] += 1
         elif rec.direction == RESPONSE and rec.latency_ms is not None:
-            st.latency_ms = rec.latency_ms
+            changed["latency_ms"] = rec.latency_ms
         if rec.protocol == EG2_SERIAL:
-            self._serial(st, rec)
+            _serial(rec, changed)
         else:
-            self._registers(st, rec)
-        return st
+            _registers(rec, changed)
+        if not changed:
+            return None
+        values.update(changed)
+        if not self.samples:
+            return None
+        return StateSample(rec.t, rec.bus, rec.device, st.protocol, rec.seq, changed, values.copy())
 
-    @staticmethod
-    def _set(st: DeviceState, name: str, value: Any) -> None:
-        reg = BY_NAME.get(name)
-        if isinstance(value, int) and reg is not None and reg.range_warning(value):
+    def update_many(self, records: list[Record]) -> list[StateSample]:
+        """The samples of a batch of records, in order."""
+        update = self.update
+        return [s for s in map(update, records) if s is not None]
+
+
+def _set(changed: dict[str, Any], name: str, value: Any, request: bool) -> None:
+    """A register value into the state, unless it is out of range or a request writes a
+    read-only register (that is flagged on the record, and the gripper ignores it)."""
+    attr = REGISTER_FIELDS.get(name)
+    if attr is None:
+        return
+    reg = BY_NAME.get(name)
+    if reg is not None:
+        if request and reg.access == "ro":
             return
-        attr = REGISTER_FIELDS.get(name)
-        if attr is not None:
-            setattr(st, attr, value)
-
-    def _registers(self, st: DeviceState, rec: Record) -> None:
-        f = rec.fields
-        values = f.get("values")
-        if isinstance(values, dict):
-            for name, value in values.items():
-                self._set(st, name, value)
-        elif rec.direction == REQUEST and "value" in f and isinstance(f.get("name"), str):
-            self._set(st, f["name"], f["value"])
-
-    def _serial(self, st: DeviceState, rec: Record) -> None:
-        f, code = rec.fields, rec.code
-        if rec.direction == REQUEST:
-            if code in (0x10, 0x18):  # catch: close with a force limit
-                st.speed, st.force_setting, st.target_opening = f.get("speed"), f.get("force_g"), 0
-                st.catch_mode = 1 if code == 0x18 else 0
-            elif code == 0x11:
-                st.speed, st.target_opening = f.get("speed"), 1000
-            elif code == 0x54 and "position" in f:
-                st.target_opening = f["position"]
-            elif code == 0x12:
-                st.max_opening, st.min_opening = f.get("max"), f.get("min")
+        if isinstance(value, int) and reg.range_warning(value):
             return
-        if code == 0x13:
-            st.max_opening, st.min_opening = f.get("max"), f.get("min")
-        elif code == 0xD9 and "position" in f:
-            st.opening = f["position"]
-        elif code == 0x41:
-            for attr, key in (
-                ("state", "state"),
-                ("fault", "fault"),
-                ("temperature_c", "temperature_c"),
-                ("opening", "position"),
-                ("force_setting", "force_setting_g"),
-            ):
-                if key in f:
-                    setattr(st, attr, f[key])
-        elif code == 0x14 and isinstance(f.get("probable"), dict):
-            p = f["probable"]
-            st.opening, st.force = p.get("opening", st.opening), p.get("force", st.force)
+    changed[attr] = value
+
+
+def _registers(rec: Record, changed: dict[str, Any]) -> None:
+    f = rec.fields
+    request = rec.direction == REQUEST
+    values = f.get("values")
+    if isinstance(values, dict):
+        for name, value in values.items():
+            _set(changed, name, value, request)
+    elif request and "value" in f and isinstance(f.get("name"), str):
+        _set(changed, f["name"], f["value"], request)
+
+
+def _catch(f: dict[str, Any], changed: dict[str, Any], continuous: bool) -> None:
+    """Catch: close with a force limit."""
+    changed.update(
+        speed=f.get("speed"),
+        force_setting=f.get("force_g"),
+        target_opening=0,
+        catch_mode=1 if continuous else 0,
+    )
+
+
+def _limits(f: dict[str, Any], changed: dict[str, Any]) -> None:
+    changed.update(max_opening=f.get("max"), min_opening=f.get("min"))
+
+
+def _seek(f: dict[str, Any], changed: dict[str, Any]) -> None:
+    if "position" in f:
+        changed["target_opening"] = f["position"]
+
+
+def _release(f: dict[str, Any], changed: dict[str, Any]) -> None:
+    changed.update(speed=f.get("speed"), target_opening=1000)
+
+
+def _position(f: dict[str, Any], changed: dict[str, Any]) -> None:
+    if "position" in f:
+        changed["opening"] = f["position"]
+
+
+def _run_state(f: dict[str, Any], changed: dict[str, Any]) -> None:
+    for key, attr in _RUN_STATE:
+        if key in f:
+            changed[attr] = f[key]
+
+
+def _probable_state(f: dict[str, Any], changed: dict[str, Any]) -> None:
+    # 0x14's layout is not documented: only the fields one client reads (docs/protocol.md)
+    p = f.get("probable")
+    if isinstance(p, dict):
+        for key, attr in (("opening", "opening"), ("force", "force")):
+            if p.get(key) is not None:
+                changed[attr] = p[key]
+
+
+_Fold = Callable[[dict[str, Any], dict[str, Any]], None]
+
+_SERIAL_REQUESTS: Final[dict[int, _Fold]] = {
+    Cmd.MOVE_CATCH_XG: lambda f, c: _catch(f, c, continuous=False),
+    Cmd.MOVE_CATCH2_XG: lambda f, c: _catch(f, c, continuous=True),
+    Cmd.MOVE_RELEASE: _release,
+    Cmd.SEEKPOS: _seek,
+    Cmd.SET_EG_PARA: _limits,
+}
+_SERIAL_RESPONSES: Final[dict[int, _Fold]] = {
+    Cmd.READ_EG_PARA: _limits,
+    Cmd.READ_ACTPOS: _position,
+    Cmd.READ_EG_RUNSTATE: _run_state,
+    Cmd.READ_EG_STATE: _probable_state,
+}
+
+
+def _serial(rec: Record, changed: dict[str, Any]) -> None:
+    table = _SERIAL_REQUESTS if rec.direction == REQUEST else _SERIAL_RESPONSES
+    fold = table.get(rec.code) if rec.code is not None else None
+    if fold is not None:
+        fold(rec.fields, changed)

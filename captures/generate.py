@@ -14,6 +14,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 from decoders import build as b  # noqa: E402
+from decoders.eg2_can import BROADCAST as CAN_BROADCAST  # noqa: E402
+from decoders.eg2_serial import BROADCAST as SERIAL_BROADCAST  # noqa: E402
+from decoders.eg2_serial import STATUS_FAILED, STATUS_OK, Cmd  # noqa: E402
 from decoders.model import CanFrame  # noqa: E402
 
 T0 = 1_763_700_000.0  # a fixed epoch so the files never change
@@ -29,24 +32,26 @@ def serial_session() -> bytes:
         if resp is not None:
             out.extend(s(dev, cmd, resp, response=True))
 
-    ex(1, 0x41, b"", bytes((1, 0, 35)) + b.u16le(1000, 100))  # run state: open, 35 °C
-    ex(1, 0x13, b"", b.u16le(1000, 112))  # read limits
-    ex(1, 0x10, b.u16le(500, 100), b"\x01")  # catch
-    ex(1, 0xD9, b"", b.u16le(497))  # read position
+    ok, failed = bytes((STATUS_OK,)), bytes((STATUS_FAILED,))
+    ex(1, Cmd.READ_EG_RUNSTATE, b"", bytes((1, 0, 35)) + b.u16le(1000, 100))  # open, 35 °C
+    ex(1, Cmd.READ_EG_PARA, b"", b.u16le(1000, 112))  # read limits
+    ex(1, Cmd.MOVE_CATCH_XG, b.u16le(500, 100), ok)  # catch
+    ex(1, Cmd.READ_ACTPOS, b"", b.u16le(497))  # read position
     out.extend(b"\x00\x13\x37\xff")  # line noise
-    ex(1, 0xD9, b"", b.u16le(430))
-    bad = bytearray(s(1, 0x11, b.u16le(500)))
+    ex(1, Cmd.READ_ACTPOS, b"", b.u16le(430))
+    bad = bytearray(s(1, Cmd.MOVE_RELEASE, b.u16le(500)))
     bad[-1] ^= 0x5A  # corrupted checksum
     out.extend(bad)
-    ex(1, 0x11, b.u16le(500), b"\x01")  # the host resends: release
-    ex(1, 0x12, b.u16le(1200, 50), b"\x55")  # bad limits refused: failure status
-    ex(2, 0x41, b"", None)  # ID 2 is not on the bus: no answer
-    ex(1, 0x54, b.u16le(500), b"\x01")  # seek 35 mm
-    ex(1, 0x04, b.u16le(3), b"\x01")  # set ID with a two-byte value (section 4)
-    ex(255, 0x16, b"", None)  # broadcast stop: nobody answers
-    ex(1, 0x14, b"", b.u16le(500, 80, 100))  # read state: probable layout
-    ex(1, 0x77, b"\x01\x02", b"\x01")  # unknown command
-    out.extend(s(1, 0x41, bytes((4, 1, 41)) + b.u16le(600, 100), response=True)[:9])
+    ex(1, Cmd.MOVE_RELEASE, b.u16le(500), ok)  # the host resends: release
+    ex(1, Cmd.SET_EG_PARA, b.u16le(1200, 50), failed)  # bad limits refused: failure status
+    ex(2, Cmd.READ_EG_RUNSTATE, b"", None)  # ID 2 is not on the bus: no answer
+    ex(1, Cmd.SEEKPOS, b.u16le(500), ok)  # seek 35 mm
+    ex(1, Cmd.PARA_ID_SET, b.u16le(3), ok)  # set ID with a two-byte value (section 4)
+    ex(SERIAL_BROADCAST, Cmd.MOVE_STOPHERE, b"", None)  # broadcast stop: nobody answers
+    ex(1, Cmd.READ_EG_STATE, b"", b.u16le(500, 80, 100))  # read state: probable layout
+    ex(1, 0x77, b"\x01\x02", ok)  # a command the manual does not list
+    run_state = bytes((4, 1, 41)) + b.u16le(600, 100)
+    out.extend(s(1, Cmd.READ_EG_RUNSTATE, run_state, response=True)[:9])
     return bytes(out)  # ends with a truncated response
 
 
@@ -107,7 +112,7 @@ def can_session() -> list[CanFrame]:
     add(b.can_write_request(1, 1020, b.u16le(1000, 800, 300)), 0.005)  # open device 1
     add(b.can_write_response(1, 1020, 6), 0.0005)
     add(b.can_read_request(3, 1120, 8), 0.004)  # device 3 does not answer
-    add(b.can_write_request(b.CAN_BROADCAST, 1012, b.u16le(1)), 0.02)  # broadcast stop
+    add(b.can_write_request(CAN_BROADCAST, 1012, b.u16le(1)), 0.02)  # broadcast stop
     add(b.can_read_request(1, 1120, 8), 0.004)
     add(b.can_read_response(1, 1120, bytes.fromhex("F3 00 03 E8 00 00 00 22")), 0.0004)
     add(CanFrame(None, 0x20000080, bytes(8), is_error=True), 0.002)  # error frame

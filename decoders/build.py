@@ -1,25 +1,19 @@
-"""Frame builders for the three protocols: the inverse of the decoders.
+"""Frame builders for the three protocols: the inverse of the decoders, and the one place
+frames are encoded.
 
 Used by the simulated gripper, the sample-capture generator, tests and benchmarks. Pure, like
-the decoders: bytes and CanFrames out, no I/O.
+the decoders: bytes and CanFrames out, no I/O. The protocol facts (headers, checksum, CRC,
+identifier layout) come from the decoders that read them.
 """
 
 from __future__ import annotations
 
 import struct
 
-import crcmod.predefined
-
+from .eg2_can import OP_READ, OP_WRITE
+from .eg2_serial import REQUEST_HEADER, RESPONSE_HEADER, checksum
+from .modbus_framing import crc16
 from .model import CanFrame
-
-SERIAL_REQUEST = b"\xeb\x90"
-SERIAL_RESPONSE = b"\xee\x16"
-
-modbus_crc = crcmod.predefined.mkCrcFun("modbus")
-
-CAN_BROADCAST = 0x3FFF
-OP_READ, OP_WRITE, OP_MOVE, OP_FOLLOW = 0, 1, 2, 3
-
 
 # -- regular serial protocol ----------------------------------------------------------------
 
@@ -27,11 +21,13 @@ OP_READ, OP_WRITE, OP_MOVE, OP_FOLLOW = 0, 1, 2, 3
 def serial_frame(device: int, cmd: int, data: bytes = b"", response: bool = False) -> bytes:
     """``EB 90 | ID | LEN | CMD | DATA | SUM`` (or ``EE 16 ...`` for a response)."""
     body = bytes((device & 0xFF, len(data) + 1, cmd)) + data
-    header = SERIAL_RESPONSE if response else SERIAL_REQUEST
-    return header + body + bytes((sum(body) & 0xFF,))
+    header = RESPONSE_HEADER if response else REQUEST_HEADER
+    return header + body + bytes((checksum(body),))
 
 
 def u16le(*values: int) -> bytes:
+    """16-bit words, low byte first (serial DATA and CAN register bytes); negative values
+    as two's complement."""
     return b"".join(struct.pack("<H", v & 0xFFFF) for v in values)
 
 
@@ -40,7 +36,7 @@ def u16le(*values: int) -> bytes:
 
 def with_crc(pdu: bytes, swapped: bool = False) -> bytes:
     """Append the CRC-16/MODBUS, low byte first (or high first, as the manual prints it)."""
-    crc = modbus_crc(pdu)
+    crc = crc16(pdu)
     return pdu + (struct.pack(">H", crc) if swapped else struct.pack("<H", crc))
 
 
@@ -75,18 +71,23 @@ def modbus_exception(slave: int, function: int, code: int) -> bytes:
 
 
 def can_id(op: int, address: int, device: int) -> int:
-    """``(op << 26) | (address << 14) | device``: 0x04FF0001 = write, address 1020, device 1."""
-    return ((op & 0x3) << 26) | ((address & 0xFFF) << 14) | (device & 0x3FFF)
-
-
-def can_id_fields(arbitration_id: int) -> tuple[int, int, int]:
-    """(operation, address, device) from a 29-bit identifier."""
-    return (arbitration_id >> 26) & 0x3, (arbitration_id >> 14) & 0xFFF, arbitration_id & 0x3FFF
+    """The 29-bit identifier ``op << 26 | address << 14 | device`` (bit 28, reserved, is 0):
+    ``can_id(1, 1020, 1) == 0x04FF0001``, a write at address 1020 on device 1. Raises
+    ValueError for an operation outside 0-3, an address outside 0-4095 or a device outside
+    0-16383 (16383 is broadcast)."""
+    if not 0 <= op <= 3:
+        raise ValueError(f"operation must be 0-3, not {op}")
+    if not 0 <= address <= 0xFFF:
+        raise ValueError(f"address must be 0-4095, not {address}")
+    if not 0 <= device <= 0x3FFF:
+        raise ValueError(f"device must be 0-16383, not {device}")
+    return op << 26 | address << 14 | device
 
 
 def can_read_request(
     device: int, address: int, n: int, t: float | None = None, padded: bool = False
 ) -> CanFrame:
+    """Read n bytes from address: DLC 1 with data[0] = n (DLC 8, zero padded, if padded)."""
     data = bytes((n,)) + (bytes(7) if padded else b"")
     return CanFrame(t, can_id(OP_READ, address, device), data)
 
@@ -99,8 +100,12 @@ def can_write_request(device: int, address: int, data: bytes, t: float | None = 
     return CanFrame(t, can_id(OP_WRITE, address, device), data)
 
 
-def can_write_response(device: int, address: int, n: int, t: float | None = None) -> CanFrame:
-    return CanFrame(t, can_id(OP_WRITE, address, device), bytes((n,)))
+def can_write_response(
+    device: int, address: int, n: int, t: float | None = None, padded: bool = False
+) -> CanFrame:
+    """The answer to a write of n bytes: DLC 1 with data[0] = n (DLC 8 if padded)."""
+    data = bytes((n,)) + (bytes(7) if padded else b"")
+    return CanFrame(t, can_id(OP_WRITE, address, device), data)
 
 
 def candump_line(frame: CanFrame, channel: str = "can0") -> str:

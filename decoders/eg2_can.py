@@ -2,7 +2,9 @@
 
 The 29-bit identifier packs ``reserved(1) | operation(2) | start address(12) | device(14)``.
 Operation 0 reads N bytes of registers, 1 writes them, 2 and 3 ("finger positioning move",
-"finger servo follow") are named by the manual with no payload layout and are shown raw.
+"finger servo follow") are named by the manual with no payload layout and are shown raw. The
+reserved bit 28 is 0 on every EG2 frame: a frame with it set is other traffic sharing the bus
+(J1939 identifiers such as ``18FF50E5`` set it), never an EG2 device.
 
 Requests and responses share one identifier and CAN frames carry no sender, so direction comes
 from the frame's shape and from a table of pending requests per identifier:
@@ -15,24 +17,27 @@ from the frame's shape and from a table of pending requests per identifier:
 A frame that fits both shapes (a DLC-1 write, a zero-padded 8-byte read) is a response when a
 request of the matching length is pending on its identifier, else a request (and says what else
 it could be). A response with nothing pending is decoded as a response when only the response
-shape fits; the pairing stage flags it as unmatched. Broadcast requests (device 16383) are never
-pending, and a pending request older than ``PENDING_TIMEOUT_S`` is forgotten when frames carry
-times.
+shape fits; the pairing stage flags it as unmatched. A host that times out and sends the same
+request again before the answer counts as two pending requests, so both answers (when the
+gripper sends two) are taken as responses. Broadcast requests (device 16383) are never pending,
+and a pending request older than ``PENDING_TIMEOUT_S`` is forgotten when frames carry times.
+``_Directions`` holds these rules.
 
 N bytes from address A cover the registers at A, A+2, ... (little endian, signed where the
 register is). An odd address or length is legal on the wire: it is flagged and the byte that
 covers half a register is shown raw (``fields["partial"]``), read as CAN addresses counting
 bytes (an odd address is the high byte of the register below it; inference).
 
-Everything else on the bus (11-bit identifiers, remote, error and CAN FD frames) is shown as a
-foreign ``can`` record; nothing here raises.
+Everything else on the bus (11-bit identifiers, reserved bit 28 set, remote, error and CAN FD
+frames) is shown as a foreign ``can`` record (flag ``foreign``); nothing here raises. Every
+warning and error carries its code in ``Record.flags`` (``decoders/flags.py``).
 
 Speed: the decoded part of a record is built once per distinct frame. Frames without register
 values (read requests, write responses) are memoised by (identifier, data, direction); frames
 with values (read responses, write requests) keep the last frame per identifier, so an idle
 gripper's answers cost a dict look-up, and a changing one reuses a per-identifier layout and a
-per-register value cache. ``fields`` may be shared between records; ``errors`` and ``warnings``
-are copied per record (later stages append to them).
+per-register value cache. ``fields`` may be shared between records; ``errors``, ``warnings``
+and ``flags`` are copied per record (later stages append to them).
 """
 
 from __future__ import annotations
@@ -42,7 +47,9 @@ from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from typing import Any, Final
 
+from . import flags as F
 from .model import EG2_CAN, FOREIGN_CAN, FRAME, REQUEST, RESPONSE, CanFrame, Record
+from .notes import Notes
 from .registers import (
     SAVE_REGISTERS,
     Register,
@@ -58,7 +65,7 @@ OP_POSITIONING_MOVE: Final = 2
 OP_SERVO_FOLLOW: Final = 3
 
 BROADCAST: Final = 0x3FFF  # device 16383
-RESERVED_BIT: Final = 1 << 28
+RESERVED_BIT: Final = 1 << 28  # 0 on every EG2 frame
 MAX_ID: Final = 0x1FFFFFFF
 MAP_FIRST, MAP_LAST = 1002, 1130  # CAN byte addresses of registers 1001 ... 1065
 
@@ -91,24 +98,12 @@ _TAG_NONE: Final = 2
 _TAG_MISMATCH: Final = 16
 
 
-def pack_id(op: int, address: int, device: int, reserved: bool = False) -> int:
-    """The 29-bit identifier of an operation (0-3) at a start address (0-4095) on a device."""
-    if not 0 <= op <= 3:
-        raise ValueError(f"operation must be 0-3, not {op}")
-    if not 0 <= address <= 0xFFF:
-        raise ValueError(f"address must be 0-4095, not {address}")
-    if not 0 <= device <= 0x3FFF:
-        raise ValueError(f"device must be 0-16383, not {device}")
-    return (RESERVED_BIT if reserved else 0) | op << 26 | address << 14 | device
-
-
-def unpack_id(arbitration_id: int) -> tuple[int, int, int, bool]:
-    """(operation, start address, device, reserved bit set) of a 29-bit identifier."""
+def unpack_id(arbitration_id: int) -> tuple[int, int, int]:
+    """(operation, start address, device) of an EG2 identifier (``build.can_id`` packs one)."""
     return (
         (arbitration_id >> 26) & 3,
         (arbitration_id >> 14) & 0xFFF,
         arbitration_id & 0x3FFF,
-        bool(arbitration_id & RESERVED_BIT),
     )
 
 
@@ -118,6 +113,82 @@ def can_error_text(error_class: int) -> str:
     if not words:
         return "CAN error frame"
     return f"CAN error frame: {', '.join(words)} (class 0x{error_class:03X})"
+
+
+def _count_shaped(data: bytes) -> bool:
+    """A read request's or write response's shape: one count byte 1-8, or 8 bytes zero padded."""
+    n = len(data)
+    return (n == 1 or (n == 8 and data.endswith(_ZERO7))) and 1 <= data[0] <= 8
+
+
+# A pending request on one identifier: (length asked for or written, its data, its time,
+# unanswered copies (a host's retransmissions), whether a copy has been answered)
+_Pending = tuple[int, bytes, float | None, int, bool]
+
+
+class _Directions:
+    """Which way an EG2 read or write frame goes: its shape, then the request pending on its
+    identifier (see the module docstring). Broadcasts are never pending."""
+
+    __slots__ = ("_pending",)
+
+    def __init__(self) -> None:
+        self._pending: dict[int, _Pending] = {}  # arbitration id -> its pending request
+
+    def __len__(self) -> int:
+        return len(self._pending)
+
+    def reset(self) -> None:
+        self._pending.clear()
+
+    def tag(self, aid: int, op: int, data: bytes, t: float | None) -> int:
+        """The direction tag of a read (op 0) or write (op 1) frame; notes requests and
+        answers in the pending table. (One function: it runs for every frame.)"""
+        pending = self._pending
+        pend = pending.get(aid)
+        if (
+            pend is not None
+            and t is not None
+            and pend[2] is not None
+            and t - pend[2] > PENDING_TIMEOUT_S
+        ):
+            pend = None  # too old to be answered
+        n = len(data)
+        # _count_shaped(data), inline: this runs for every frame
+        count_shaped = (n == 1 or (n == 8 and data.endswith(_ZERO7))) and 1 <= data[0] <= 8
+        if op == OP_READ:
+            if pend is not None and pend[0] == n:
+                tag = _TAG_RESPONSE
+            elif count_shaped:
+                tag = _TAG_REQUEST
+                n = data[0]
+            elif not n:
+                return _TAG_NONE
+            elif pend is None:
+                return _TAG_RESPONSE  # nothing pending: the pairing stage says so
+            else:
+                tag = _TAG_MISMATCH + pend[0]
+        elif pend is not None and count_shaped and data[0] == pend[0]:
+            tag = _TAG_RESPONSE
+        elif n:
+            tag = _TAG_REQUEST
+        else:
+            return _TAG_NONE
+        if tag == _TAG_REQUEST:
+            if aid & 0x3FFF != BROADCAST:  # nobody answers a broadcast
+                if pend is not None and pend[1] == data and not pend[4]:
+                    # the same request again before any answer: a retransmission, one more due
+                    pending[aid] = (n, data, t, pend[3] + 1, False)
+                else:
+                    if len(pending) >= PENDING_LIMIT:
+                        pending.clear()
+                    pending[aid] = (n, data, t, 1, False)
+        elif pend is not None:  # an answer: one copy fewer is waiting
+            if pend[3] > 1:
+                pending[aid] = (pend[0], pend[1], pend[2], pend[3] - 1, True)
+            else:
+                del pending[aid]
+        return tag
 
 
 def _register_at(address: int) -> Register:
@@ -167,39 +238,40 @@ def _span_keys(regs: list[Register]) -> str:
     return f"{regs[0].key}..{regs[-1].key}"
 
 
-def _span_warnings(address: int, n: int, regs: list[Register], write: bool) -> list[str]:
-    """Flags for how a span is laid out: odd address or length, unknown or read-only registers."""
-    warnings: list[str] = []
+def _span_warnings(address: int, n: int, regs: list[Register], write: bool, notes: Notes) -> None:
+    """Flag how a span is laid out: odd address or length, unknown or read-only registers."""
     if address & 1:
         reg = _register_at(address - 1)
-        warnings.append(
+        notes.warn(
+            F.ODD_SPAN,
             f"odd start address {address}: the first byte is the high byte of {reg.name} "
-            f"(address {address - 1})"
+            f"(address {address - 1})",
         )
     if (address + n) & 1 and n > 0:
         reg = _register_at(address + n - 1)
-        warnings.append(
+        notes.warn(
+            F.ODD_SPAN,
             f"the span ends inside a register ({_plural(n)} from {address}): the last byte is "
-            f"the low byte of {reg.name} (address {address + n - 1})"
+            f"the low byte of {reg.name} (address {address + n - 1})",
         )
     elif n & 1:
-        warnings.append(f"odd length {n}: registers are 2 bytes")
+        notes.warn(F.ODD_SPAN, f"odd length {n}: registers are 2 bytes")
     for reg in regs:
         if not reg.documented:
             if MAP_FIRST <= reg.can_address <= MAP_LAST:
-                warnings.append(f"undocumented address {reg.can_address} (register {reg.number})")
+                text = f"undocumented address {reg.can_address} (register {reg.number})"
             else:
-                warnings.append(
+                text = (
                     f"address {reg.can_address} is outside the register map "
                     f"({MAP_FIRST}-{MAP_LAST})"
                 )
+            notes.warn(F.UNDOCUMENTED, text)
         elif write and reg.access == "ro":
-            warnings.append(f"write to read-only register {reg.name} ({reg.key})")
-    return warnings
+            notes.warn(F.READ_ONLY_WRITE, f"write to read-only register {reg.name} ({reg.key})")
 
 
 # (protocol, direction, device, code, name, fields, errors, warnings, summary, pair_key,
-#  expects_response, is_save)
+#  expects_response, is_save, flags)
 _Template = tuple[
     str,
     str | None,
@@ -213,6 +285,7 @@ _Template = tuple[
     tuple[Any, ...] | None,
     bool,
     bool,
+    list[str],
 ]
 
 
@@ -271,6 +344,7 @@ class _Layout:
     name: str | None
     fields: dict[str, Any]
     warnings: list[str]
+    flags: list[str]
     prefix: str  # of the summary
     pair_key: tuple[Any, ...]
     expects: bool
@@ -289,13 +363,11 @@ class Eg2CanDecoder:
     for any other device are shown as foreign ``can`` records.
     """
 
-    protocol = EG2_CAN
-
     def __init__(self, bus: str = "can0", *, devices: Collection[int] | None = None) -> None:
         self.bus = bus
         self.devices = frozenset(devices) if devices is not None else None
-        # arbitration id -> (byte count, time of the request); the id fixes the operation
-        self._pending: dict[int, tuple[int, float | None]] = {}
+        self._directions = _Directions()
+        self._direction = self._directions.tag  # bound once: it runs for every frame
         self._memo: dict[tuple[Any, ...], _Template] = {}
         # (arbitration id, length, direction tag) -> the last read response or write request:
         # (data, template, layout)
@@ -303,11 +375,7 @@ class Eg2CanDecoder:
 
     def reset(self) -> None:
         """Forget pending requests (a new capture, or a gap in the stream)."""
-        self._pending.clear()
-
-    def finish(self) -> list[Record]:
-        """Records still held back at the end of the stream: none, CAN frames are whole."""
-        return []
+        self._directions.reset()
 
     def decode(self, frame: CanFrame, index: int) -> Record:
         """The Record of one frame. Never raises."""
@@ -317,124 +385,79 @@ class Eg2CanDecoder:
                 data = bytes(data)
             aid = frame.arbitration_id
             n = len(data)
-            dlc = frame.dlc
             if (
                 not frame.is_extended
                 or frame.is_remote
                 or frame.is_error
                 or frame.is_fd
                 or n > 8
-                or (dlc is not None and dlc != n)
-                or not 0 <= aid <= 0x1FFFFFFF
+                or (frame.dlc is not None and frame.dlc != n)
+                or not 0 <= aid < RESERVED_BIT  # bit 28 set: not EG2 (J1939 and others)
                 or (
-                    self.devices is not None
+                    self.devices is not None  # the device filter (broadcasts pass it)
                     and aid & 0x3FFF not in self.devices
                     and aid & 0x3FFF != BROADCAST
                 )
             ):
                 return self._foreign(frame, index, data)
-
-            # direction: the frame's shape, then the pending request on this identifier
-            op = (aid >> 26) & 3
-            pending = self._pending
             t = frame.t
-            pend = pending.get(aid)
-            if (
-                pend is not None
-                and t is not None
-                and pend[1] is not None
-                and t - pend[1] > PENDING_TIMEOUT_S
-            ):
-                pend = None
-            if op == 0:  # read
-                if pend is not None and pend[0] == n:
-                    tag = _TAG_RESPONSE
-                    valued = True
-                    del pending[aid]
-                elif (n == 1 or (n == 8 and data.endswith(_ZERO7))) and 1 <= data[0] <= 8:
-                    tag = _TAG_REQUEST
-                    valued = False
-                    if aid & 0x3FFF != BROADCAST:  # nobody answers a broadcast
-                        if len(pending) >= PENDING_LIMIT:
-                            pending.clear()
-                        pending[aid] = (data[0], t)
-                elif n:
-                    valued = True
-                    if pend is not None:
-                        tag = _TAG_MISMATCH + pend[0]
-                        del pending[aid]
-                    else:
-                        tag = _TAG_RESPONSE
-                else:
-                    tag = _TAG_NONE
-                    valued = False
-            elif op == 1:  # write
-                if (
-                    pend is not None
-                    and (n == 1 or (n == 8 and data.endswith(_ZERO7)))
-                    and data[0] == pend[0]
-                ):
-                    tag = _TAG_RESPONSE
-                    valued = False
-                    del pending[aid]
-                elif n:
-                    tag = _TAG_REQUEST
-                    valued = True
-                    if aid & 0x3FFF != BROADCAST:
-                        if len(pending) >= PENDING_LIMIT:
-                            pending.clear()
-                        pending[aid] = (n, t)
-                else:
-                    tag = _TAG_NONE
-                    valued = False
+            op = aid >> 26  # bit 28 is clear: the operation
+            tag = self._direction(aid, op, data, t) if op <= OP_WRITE else _TAG_NONE
+            # register values ride on read responses and write requests
+            if tag != _TAG_NONE and (tag == _TAG_REQUEST) == (op == OP_WRITE):
+                tpl = self._valued(aid, data, tag)
             else:
-                tag = _TAG_NONE
-                valued = False
-
-            if valued:
-                # register values change from frame to frame: remember the last frame per
-                # identifier, length and direction (an idle gripper answers the same bytes)
-                # with the layout that the three fix
-                lkey = aid << 10 | n << 6 | tag
-                lasts = self._last
-                last = lasts.get(lkey)
-                if last is None:
-                    layout = _make_layout(aid, n, tag)
-                    tpl = _fill(layout, data)
-                    if len(lasts) >= MEMO_LIMIT:
-                        lasts.clear()
-                    lasts[lkey] = (data, tpl, layout)
-                elif last[0] == data:
-                    tpl = last[1]
-                else:
-                    layout = last[2]
-                    tpl = _fill(layout, data)
-                    lasts[lkey] = (data, tpl, layout)
-            else:
-                key = (aid, data, tag)
-                memo = self._memo
-                hit = memo.get(key)
-                if hit is None:
-                    if len(memo) >= MEMO_LIMIT:
-                        memo.clear()
-                    hit = memo[key] = _build_other(aid, data, tag)
-                tpl = hit
+                tpl = self._other(aid, data, tag)
             return _from_template(tpl, t, self.bus, n, data, index)
         except Exception as exc:  # a decoder bug must not stop a capture: show it on the frame
-            raw = bytes(getattr(frame, "data", b"") or b"")
-            return Record(
-                t=getattr(frame, "t", None),
-                bus=self.bus,
-                protocol=FOREIGN_CAN,
-                kind=FRAME,
-                length=len(raw),
-                raw=raw,
-                index=index,
-                errors=[f"internal decoder error: {exc!r}"],
-                summary="undecodable frame",
-            )
+            return self._internal_error(frame, index, exc)
 
     # -- the decoded part of a record, built once per distinct frame ------------------------
+
+    def _valued(self, aid: int, data: bytes, tag: int) -> _Template:
+        """A read response or write request: register values change from frame to frame, so
+        keep the last frame per identifier, length and direction (an idle gripper answers the
+        same bytes) with the layout that the three fix."""
+        lkey = aid << 10 | len(data) << 6 | tag
+        lasts = self._last
+        last = lasts.get(lkey)
+        if last is not None and last[0] == data:
+            return last[1]
+        if last is None:
+            layout = _make_layout(aid, len(data), tag)
+            if len(lasts) >= MEMO_LIMIT:
+                lasts.clear()
+        else:
+            layout = last[2]
+        tpl = _fill(layout, data)
+        lasts[lkey] = (data, tpl, layout)
+        return tpl
+
+    def _other(self, aid: int, data: bytes, tag: int) -> _Template:
+        """Frames without register values, memoised whole."""
+        key = (aid, data, tag)
+        memo = self._memo
+        tpl = memo.get(key)
+        if tpl is None:
+            if len(memo) >= MEMO_LIMIT:
+                memo.clear()
+            tpl = memo[key] = _build_other(aid, data, tag)
+        return tpl
+
+    def _internal_error(self, frame: CanFrame, index: int, exc: Exception) -> Record:
+        raw = bytes(getattr(frame, "data", b"") or b"")
+        return Record(
+            t=getattr(frame, "t", None),
+            bus=self.bus,
+            protocol=FOREIGN_CAN,
+            kind=FRAME,
+            length=len(raw),
+            raw=raw,
+            index=index,
+            errors=[f"internal decoder error: {exc!r}"],
+            summary="undecodable frame",
+            flags=[F.FOREIGN, F.DECODER_ERROR],
+        )
 
     # -- frames that are not EG2 ------------------------------------------------------------
 
@@ -460,40 +483,39 @@ class Eg2CanDecoder:
         return _from_template(tpl, frame.t, self.bus, length, data, index)
 
 
-def _id_fields(aid: int, n: int) -> tuple[dict[str, Any], list[str]]:
-    """The fields and warnings every EG2 frame of this identifier and length has."""
-    op, address, device, reserved = unpack_id(aid)
+def _id_fields(aid: int, n: int) -> tuple[dict[str, Any], Notes]:
+    """The fields and notes every EG2 frame of this identifier and length has."""
+    op, address, device = unpack_id(aid)
     fields: dict[str, Any] = {
         "op": OPERATIONS[op],
         "address": address,
         "id": f"0x{aid:08X}",
         "dlc": n,
     }
-    warnings: list[str] = []
-    if reserved:
-        warnings.append("reserved identifier bit 28 is set")
+    notes = Notes()
     if device == 0:
-        warnings.append("device 0 is outside the settable IDs 1-16382")
+        notes.warn(F.INVALID_ID, "device 0 is outside the settable IDs 1-16382")
     if device == BROADCAST:
         fields["broadcast"] = True
-    return fields, warnings
+    return fields, notes
 
 
 def _make_layout(aid: int, n: int, tag: int) -> _Layout:
     """The fixed part of a read response or write request of n bytes."""
-    op, address, device, _ = unpack_id(aid)
-    fields, warnings = _id_fields(aid, n)
+    op, address, device = unpack_id(aid)
+    fields, notes = _id_fields(aid, n)
     regs = _span_registers(address, n)
     fields["length"] = n
     fields["registers"] = [r.name for r in regs]
     write = op == OP_WRITE
     if tag >= _TAG_MISMATCH:
         asked = tag - _TAG_MISMATCH
-        warnings.append(
+        notes.warn(
+            F.LENGTH_MISMATCH,
             f"response length mismatch: the pending request asked for {_plural(asked)}, "
-            f"the response carries {n}"
+            f"the response carries {n}",
         )
-    warnings += _span_warnings(address, n, regs, write=write)
+    _span_warnings(address, n, regs, write, notes)
     head = _register_at(address - 1) if address & 1 else None
     start = 1 if head is not None else 0
     whole = (n - start) // 2
@@ -508,7 +530,8 @@ def _make_layout(aid: int, n: int, tag: int) -> _Layout:
         code=op,
         name=_span_name(regs),
         fields=fields,
-        warnings=warnings,
+        warnings=notes.warnings,
+        flags=notes.flags,
         prefix=f"write {_plural(n)} at {address}: " if write else "-> ",
         pair_key=(aid,),
         expects=write and device != BROADCAST,
@@ -524,19 +547,21 @@ def _make_layout(aid: int, n: int, tag: int) -> _Layout:
 def _fill(layout: _Layout, data: bytes) -> _Template:
     """A layout with the register values of one frame."""
     fields = layout.fields.copy()
-    warnings = layout.warnings.copy()
-    n = len(data)
-    if (n == 1 or (n == 8 and data.endswith(_ZERO7))) and 1 <= data[0] <= 8:
+    notes = Notes()
+    notes.warnings += layout.warnings
+    notes.flags += layout.flags
+    if _count_shaped(data):
         if layout.ambiguity == "read":
-            warnings.append(
+            text = (
                 f"could also be a repeated read request of {_plural(data[0])} "
                 "(taken as the response to the pending request)"
             )
         else:
-            warnings.append(
+            text = (
                 f"could also be the response to a write of {_plural(data[0])} "
                 "whose request was not seen"
             )
+        notes.warn(F.AMBIGUOUS_DIRECTION, text)
     values: dict[str, int] = {}
     parts: list[str] = []
     partial: list[dict[str, Any]] = []
@@ -558,7 +583,7 @@ def _fill(layout: _Layout, data: bytes) -> _Template:
         if special is not None:
             problem, extra, save = special
             if problem is not None:
-                warnings.append(problem)
+                notes.warn(F.OUT_OF_RANGE, problem)
             if extra is not None:
                 fields[extra[0]] = extra[1]
             if save:
@@ -581,21 +606,21 @@ def _fill(layout: _Layout, data: bytes) -> _Template:
         layout.name,
         fields,
         [],
-        warnings,
+        notes.warnings,
         layout.prefix + ", ".join(parts),
         layout.pair_key,
         layout.expects,
         is_save,
+        notes.flags,
     )
 
 
 def _build_other(aid: int, data: bytes, tag: int) -> _Template:
     """Frames that carry no register values: read requests, write responses, frames without
     data, and operations 2 and 3."""
-    op, address, device, _ = unpack_id(aid)
+    op, address, device = unpack_id(aid)
     n = len(data)
-    fields, warnings = _id_fields(aid, n)
-    errors: list[str] = []
+    fields, notes = _id_fields(aid, n)
     direction: str | None = None
     name: str | None = None
     if op == OP_READ and tag == _TAG_REQUEST:
@@ -607,7 +632,7 @@ def _build_other(aid: int, data: bytes, tag: int) -> _Template:
         fields["registers"] = [r.name for r in regs]
         if n == 8:
             fields["padded"] = True
-        warnings += _span_warnings(address, count, regs, write=False)
+        _span_warnings(address, count, regs, False, notes)
         summary = f"read {_plural(count)} at {address} ({_span_keys(regs)})"
     elif op == OP_WRITE and tag == _TAG_RESPONSE:
         direction = RESPONSE
@@ -621,13 +646,14 @@ def _build_other(aid: int, data: bytes, tag: int) -> _Template:
         summary = f"-> wrote {_plural(count)}"
     elif op in (OP_READ, OP_WRITE):  # no data at all
         what = "read" if op == OP_READ else "write"
-        errors.append(f"{what} frame without data: neither a request nor a response")
+        notes.error(F.MALFORMED, f"{what} frame without data: neither a request nor a response")
         summary = f"{what} at {address}: no data"
     else:
         name = OPERATIONS[op]
         fields["data"] = _hex(data)
-        warnings.append(
-            f"operation {op} ({OPERATIONS[op]}): the manual gives no payload layout, shown raw"
+        notes.warn(
+            F.UNDOCUMENTED,
+            f"operation {op} ({OPERATIONS[op]}): the manual gives no payload layout, shown raw",
         )
         summary = f"{OPERATIONS[op]} at {address} [{n}] {_hex(data)}".rstrip()
     pair_key = (aid,) if direction is not None else None
@@ -639,60 +665,52 @@ def _build_other(aid: int, data: bytes, tag: int) -> _Template:
         op,
         name,
         fields,
-        errors,
-        warnings,
+        notes.errors,
+        notes.warnings,
         summary,
         pair_key,
         expects,
         False,
+        notes.flags,
     )
 
 
 def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) -> _Template:
     aid = frame.arbitration_id
-    errors: list[str] = []
-    warnings: list[str] = []
+    notes = Notes()
+    notes.flag(F.FOREIGN)
     extended = frame.is_extended
     ident = f"0x{aid:08X}" if extended else f"0x{aid:03X}"
     fields: dict[str, Any] = {"id": ident, "dlc": length, "extended": extended}
     kind = "extended" if extended else "standard"
     if frame.is_error:
         text = can_error_text(aid)
-        errors.append(text)
+        notes.error(F.CAN_ERROR_FRAME, text)
         fields["error_class"] = aid
         fields["data"] = _hex(data)
         summary = f"{text} [{len(data)}] {_hex(data)}".rstrip()
-        return (
-            FOREIGN_CAN,
-            None,
-            None,
-            None,
-            None,
-            fields,
-            errors,
-            warnings,
-            summary,
-            None,
-            False,
-            False,
-        )
-    if not 0 <= aid <= (MAX_ID if extended else 0x7FF):
-        warnings.append(f"identifier {aid:#x} does not fit in {29 if extended else 11} bits")
-    if frame.is_remote:
-        warnings.append("remote frame")
-        summary = f"remote {kind} {ident} [{length}]"
     else:
-        if frame.is_fd:
-            fields["fd"] = True
-            kind = "FD " + kind
-        elif len(data) > 8:
-            warnings.append(f"{len(data)} data bytes in a classic CAN frame")
-        elif frame.dlc is not None and frame.dlc != len(data):
-            warnings.append(f"DLC {frame.dlc} with {len(data)} data bytes")
-        elif extended and filtered:
-            fields["eg2_device"] = aid & 0x3FFF  # left out by the decoder's device filter
-        summary = f"{kind} {ident} [{len(data)}] {_hex(data)}".rstrip()
-    fields["data"] = _hex(data)
+        if not 0 <= aid <= (MAX_ID if extended else 0x7FF):
+            notes.warn(
+                F.MALFORMED,
+                f"identifier {aid:#x} does not fit in {29 if extended else 11} bits",
+            )
+        if frame.is_remote:
+            # not EG2 (it sends data frames only): the code is the record's own foreign
+            notes.warn(F.FOREIGN, "remote frame")
+            summary = f"remote {kind} {ident} [{length}]"
+        else:
+            if frame.is_fd:
+                fields["fd"] = True
+                kind = "FD " + kind
+            elif len(data) > 8:
+                notes.warn(F.MALFORMED, f"{len(data)} data bytes in a classic CAN frame")
+            elif frame.dlc is not None and frame.dlc != len(data):
+                notes.warn(F.MALFORMED, f"DLC {frame.dlc} with {len(data)} data bytes")
+            elif extended and filtered and 0 <= aid < RESERVED_BIT:
+                fields["eg2_device"] = aid & 0x3FFF  # left out by the decoder's device filter
+            summary = f"{kind} {ident} [{len(data)}] {_hex(data)}".rstrip()
+        fields["data"] = _hex(data)
     return (
         FOREIGN_CAN,
         None,
@@ -700,12 +718,13 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
         None,
         None,
         fields,
-        errors,
-        warnings,
+        notes.errors,
+        notes.warnings,
         summary,
         None,
         False,
         False,
+        notes.flags,
     )
 
 
@@ -713,9 +732,9 @@ def _from_template(
     tpl: Any, t: float | None, bus: str, length: int, data: bytes, index: int
 ) -> Record:
     """A Record from a memoised decode; positional, as this is the hot path, with fresh
-    errors/warnings lists (later stages append to them)."""
-    (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv) = tpl
+    errors/warnings/flags lists (later stages append to them)."""
+    (pr, di, dv, co, na, fi, er, wa, su, pk, ex, sv, fl) = tpl
     return Record(
         t, bus, pr, FRAME, length, data, None, index, di, dv, co, na, fi,
-        er.copy(), wa.copy(), su, -1, None, None, pk, ex, sv,
+        er.copy(), wa.copy(), su, -1, None, None, pk, ex, sv, fl.copy(),
     )  # fmt: skip

@@ -8,7 +8,8 @@ Built like a scapy/Wireshark dissector: ``COMMANDS`` is a table of messages keye
 with its manual name, a summary verb and its request and response layouts (lists of fields with
 struct format, unit and documented range). The few payloads that a flat list cannot describe
 (set ID by LEN, the run state, the undocumented 0x14 reply, the hand-compatible codes) have a
-small decode function instead. A CMD in no table still decodes, as ``UNKNOWN_0xNN``.
+small decode function instead. A CMD in no table still decodes, as ``UNKNOWN_0xNN``. Every
+error and warning is written with its flag code (``Notes``, ``decoders/flags.py``).
 
 Speed: a live 115200-baud line carries under 2k frames/s, but a capture replay wants 300k/s.
 Decoding is a pure function of the frame bytes and the same few dozen frames repeat all day, so
@@ -23,11 +24,14 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 from dataclasses import fields as dataclass_fields
+from enum import IntEnum
 from functools import partial
 from typing import Any, Final
 
+from . import flags as F
 from .framing import NEED_MORE, ByteStreamDecoder
 from .model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
+from .notes import Notes
 from .registers import fault_text, opening_mm, state_text
 
 __all__ = [
@@ -35,12 +39,41 @@ __all__ = [
     "COMMANDS",
     "REQUEST_HEADER",
     "RESPONSE_HEADER",
+    "STATUS_FAILED",
+    "STATUS_OK",
+    "Cmd",
     "Command",
     "Eg2SerialDecoder",
     "Field",
-    "build_frame",
     "checksum",
 ]
+
+
+class Cmd(IntEnum):
+    """The CMD byte of the gripper's commands (the manual's names without ``CMD_MC_``); the
+    one place the codes are written down (``COMMANDS`` below describes each). Frames are
+    built by ``decoders.build.serial_frame``."""
+
+    PARA_SAVE = 0x01
+    PARA_ID_SET = 0x04
+    MOVE_CATCH_XG = 0x10
+    MOVE_RELEASE = 0x11
+    SET_EG_PARA = 0x12
+    READ_EG_PARA = 0x13
+    READ_EG_STATE = 0x14
+    MOVE_STOPHERE = 0x16
+    ERROR_CLR = 0x17
+    MOVE_CATCH2_XG = 0x18
+    READ_EG_RUNSTATE = 0x41
+    SET_DRVALL_SPEED = 0x51
+    SET_DRVALL_YBP_THRESHOLD = 0x52
+    SEEKPOS = 0x54
+    READ_DRVALL_SPEED = 0xD2
+    READ_DRVALL_YBP_THRESHOLD = 0xD3
+    READ_DRVALL_SEEKGYHANGLE = 0xD7
+    READ_ACTPOS = 0xD9
+    READ_HAND_STATUS = 0xDC
+
 
 REQUEST_HEADER: Final = b"\xeb\x90"  # host -> gripper
 RESPONSE_HEADER: Final = b"\xee\x16"  # gripper -> host
@@ -50,21 +83,14 @@ _HEADER_PREFIXES: Final = (REQUEST_HEADER, RESPONSE_HEADER, b"\xeb", b"\xee")
 # A header, or its first byte as the last byte held (the second may be on its way).
 _HEADER_RE: Final = re.compile(rb"\xeb(?:\x90|\Z)|\xee(?:\x16|\Z)")
 
-# The decode of one message body: (fields, summary, errors, warnings). The header-level parts
-# (id, checksum, broadcast) are added by the caller.
-Decoded = tuple[dict[str, Any], str, list[str], list[str]]
+# The decode of one message body: (fields, summary); its errors and warnings go to the Notes
+# passed in. The header-level parts (id, checksum, broadcast) are added by the caller.
+Decoded = tuple[dict[str, Any], str]
 
 
 def checksum(body: bytes | bytearray) -> int:
     """SUM over ID + LEN + CMD + DATA (everything between the header and SUM)."""
     return sum(body) & 0xFF
-
-
-def build_frame(direction: str, device: int, code: int, data: bytes = b"") -> bytes:
-    """Encode one frame (for simulators and tests): header, ID, LEN, CMD, DATA, SUM."""
-    header = REQUEST_HEADER if direction == REQUEST else RESPONSE_HEADER
-    body = bytes((device, len(data) + 1, code)) + data
-    return header + body + bytes((checksum(body),))
 
 
 def _hex(data: bytes) -> str:
@@ -103,18 +129,22 @@ class Field:
 
 
 # A layout is a list of fields, or a function for a payload a flat list cannot describe.
-CustomDecode = Callable[["Command", str, bytes, int], Decoded]
+CustomDecode = Callable[["Command", str, bytes, int, Notes], Decoded]
 Layout = tuple[Field, ...] | CustomDecode
 
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    code: int
-    name: str  # the manual's identifier
+    code: Cmd
     verb: str  # request summary ("catch", "read limits")
     request: Layout = ()
     response: Layout = ()  # () means the one status byte of a write/action command
     alias: str | None = None  # the hand's name for the same code (section 1.2)
+
+    @property
+    def name(self) -> str:
+        """The manual's identifier (``CMD_MC_MOVE_CATCH_XG``)."""
+        return "CMD_MC_" + self.code.name
 
 
 SPEED = Field("speed", "H", "speed", "", 1, 1000)
@@ -132,19 +162,22 @@ def _words(n: int) -> str:
     return f"{n} data byte" + ("" if n == 1 else "s")
 
 
-def _mismatch(cmd: Command, direction: str, expected: str, data: bytes) -> Decoded:
+def _mismatch(cmd: Command, direction: str, expected: str, data: bytes, notes: Notes) -> Decoded:
     """A payload that does not fit the documented layout: show it raw, never guess."""
     fields: dict[str, Any] = {"data": _hex(data)}
     if cmd.alias is not None and len(data) >= 2:
         # the hand's form of this code carries a list of u16 (section 1.2)
         fields["values"] = _u16_list(data)[0]
     head = cmd.verb if direction == REQUEST else "->"
-    error = f"{cmd.name} {direction}: expected {expected}, got {len(data)}"
-    return fields, f"{head} unexpected data {_hex(data) or '(none)'}", [error], []
+    notes.error(F.MALFORMED, f"{cmd.name} {direction}: expected {expected}, got {len(data)}")
+    return fields, f"{head} unexpected data {_hex(data) or '(none)'}"
 
 
-def _compile(cmd: Command, direction: str, layout: Layout) -> Callable[[bytes, int], Decoded]:
-    """Turn a layout into a decode function (data, device) -> Decoded.
+DecodeFn = Callable[[bytes, int, Notes], Decoded]
+
+
+def _compile(cmd: Command, direction: str, layout: Layout) -> DecodeFn:
+    """Turn a layout into a decode function (data, device, notes) -> Decoded.
 
     What does not depend on the values is worked out here, once (the struct, the summary
     labels, the ranges), so the decode of a reply that rarely repeats (a moving gripper's
@@ -169,12 +202,11 @@ def _compile(cmd: Command, direction: str, layout: Layout) -> Callable[[bytes, i
         for f in layout
     ]
 
-    def decode(data: bytes, device: int) -> Decoded:
+    def decode(data: bytes, device: int, notes: Notes) -> Decoded:
         if len(data) != st.size:
-            return _mismatch(cmd, direction, expected, data)
+            return _mismatch(cmd, direction, expected, data, notes)
         fields: dict[str, Any] = {}
         parts = [head]
-        warnings: list[str] = []
         for (key, mm_key, lo, hi, label, suffix), v in zip(plan, st.unpack(data), strict=False):
             fields[key] = v
             if mm_key is None:
@@ -183,8 +215,8 @@ def _compile(cmd: Command, direction: str, layout: Layout) -> Callable[[bytes, i
                 fields[mm_key] = _mm(v)
                 parts.append(f"{label}={v} ({_mm_text(v)} mm)")
             if not lo <= v <= hi:
-                warnings.append(f"{label} out of range ({lo}-{hi}): {v}")
-        return fields, " ".join(parts), [], warnings
+                notes.warn(F.OUT_OF_RANGE, f"{label} out of range ({lo}-{hi}): {v}")
+        return fields, " ".join(parts)
 
     return decode
 
@@ -192,42 +224,49 @@ def _compile(cmd: Command, direction: str, layout: Layout) -> Callable[[bytes, i
 # -- the payloads a field list cannot describe ---------------------------------------------
 
 
-def _status(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+# the one status byte that answers a write or an action (section 1.1)
+STATUS_OK: Final = 0x01
+STATUS_FAILED: Final = 0x55  # "resend the command"
+
+
+def _status(cmd: Command, direction: str, data: bytes, device: int, notes: Notes) -> Decoded:
     """The one status byte of a write/action response: 0x01 ok, 0x55 failure."""
     if len(data) != 1:
-        return _mismatch(cmd, direction, "1 data byte (status)", data)
+        return _mismatch(cmd, direction, "1 data byte (status)", data, notes)
     b = data[0]
-    if b == 0x01:
-        return {"status": "ok"}, "-> ok", [], []
-    if b == 0x55:
-        warning = "write failure status 0x55 (the host should resend)"
-        return {"status": "failure"}, "-> FAILED (0x55)", [], [warning]
-    warning = f"unknown status byte 0x{b:02X} (0x01 is ok, 0x55 failure)"
-    return {"status": f"unknown 0x{b:02X}"}, f"-> unknown status 0x{b:02X}", [], [warning]
+    if b == STATUS_OK:
+        return {"status": "ok"}, "-> ok"
+    if b == STATUS_FAILED:
+        notes.warn(F.WRITE_FAILED, "write failure status 0x55 (the host should resend)")
+        return {"status": "failure"}, "-> FAILED (0x55)"
+    # a status the manual does not list: not said to have failed, not said to be ok
+    notes.warn(F.UNDOCUMENTED, f"unknown status byte 0x{b:02X} (0x01 is ok, 0x55 failure)")
+    return {"status": f"unknown 0x{b:02X}"}, f"-> unknown status 0x{b:02X}"
 
 
-def _set_id(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+def _set_id(cmd: Command, direction: str, data: bytes, device: int, notes: Notes) -> Decoded:
     """New ID: one byte per the manual, a u16 LE in one client's code (section 4)."""
     if len(data) == 1:
         new_id, width = data[0], 1
     elif len(data) == 2:
         new_id, width = data[0] | data[1] << 8, 2
     else:
-        return _mismatch(cmd, direction, "1 or 2 data bytes", data)
-    warnings = []
+        return _mismatch(cmd, direction, "1 or 2 data bytes", data, notes)
     lo, hi = _ID_RANGE
     if not lo <= new_id <= hi:
-        warnings.append(f"new_id out of range ({lo}-{hi}): {new_id}")
+        notes.warn(F.OUT_OF_RANGE, f"new_id out of range ({lo}-{hi}): {new_id}")
     if device == BROADCAST:
-        warnings.append("set ID sent to broadcast: every gripper on the bus takes the new ID")
+        notes.warn(
+            F.BROADCAST, "set ID sent to broadcast: every gripper on the bus takes the new ID"
+        )
     summary = f"set ID {device} -> {new_id}" + (" (2-byte value)" if width == 2 else "")
-    return {"new_id": new_id, "id_width": width}, summary, [], warnings
+    return {"new_id": new_id, "id_width": width}, summary
 
 
-def _run_state(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+def _run_state(cmd: Command, direction: str, data: bytes, device: int, notes: Notes) -> Decoded:
     """0x41 reply: state u8, fault u8, temperature u8, position u16, force setting u16."""
     if len(data) != _RUNSTATE.size:
-        return _mismatch(cmd, direction, _words(_RUNSTATE.size), data)
+        return _mismatch(cmd, direction, _words(_RUNSTATE.size), data, notes)
     state, fault, temp, pos, force = _RUNSTATE.unpack(data)
     text, mm = _STATE_TEXT[state], _mm(pos)
     fields = {
@@ -245,30 +284,29 @@ def _run_state(cmd: Command, direction: str, data: bytes, device: int) -> Decode
         f"-> state={state} {text}, {faults}, {temp} °C, "
         f"position={pos} ({_mm_text(pos)} mm), force setting={force} g"
     )
-    warnings = []
     if not 1 <= state <= 6:
-        warnings.append(f"state out of range (1-6): {state}")
+        notes.warn(F.OUT_OF_RANGE, f"state out of range (1-6): {state}")
     if fault:
-        warnings.append(f"gripper reports fault: {faults}")
+        notes.warn(F.DEVICE_FAULT, f"gripper reports fault: {faults}")
     if not 0 <= pos <= 1000:
-        warnings.append(f"position out of range (0-1000): {pos}")
+        notes.warn(F.OUT_OF_RANGE, f"position out of range (0-1000): {pos}")
     if not 50 <= force <= 1000:
-        warnings.append(f"force setting out of range (50-1000): {force}")
-    return fields, summary, [], warnings
+        notes.warn(F.OUT_OF_RANGE, f"force setting out of range (50-1000): {force}")
+    return fields, summary
 
 
-def _eg_state(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+def _eg_state(cmd: Command, direction: str, data: bytes, device: int, notes: Notes) -> Decoded:
     """0x14 reply: not documented. One client reads opening, force, threshold (section 4)."""
     fields: dict[str, Any] = {"data": _hex(data)}
     if len(data) != 6:
-        return fields, f"-> {_words(len(data))} {_hex(data)} (layout not documented)", [], []
+        return fields, f"-> {_words(len(data))} {_hex(data)} (layout not documented)"
     opening, force, threshold = struct.unpack("<HHH", data)
     fields["probable"] = {"opening": opening, "force": force, "force_threshold": threshold}
     summary = (
         f"-> {_hex(data)}, probable layout (unverified): "
         f"opening={opening} ({_mm_text(opening)} mm) force={force} force threshold={threshold}"
     )
-    return fields, summary, [], []
+    return fields, summary
 
 
 def _u16_list(data: bytes) -> tuple[list[int], bytes]:
@@ -276,30 +314,32 @@ def _u16_list(data: bytes) -> tuple[list[int], bytes]:
     return list(struct.unpack(f"<{even // 2}H", data[:even])), data[even:]
 
 
-def _hand_values(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+def _hand_values(cmd: Command, direction: str, data: bytes, device: int, notes: Notes) -> Decoded:
     """Hand-compatible codes: the gripper's payload lengths are unknown, so u16 values by LEN."""
     head = cmd.verb if direction == REQUEST else "->"
     if not data:
-        return {}, head, [], []
+        return {}, head
     values, rest = _u16_list(data)
     fields: dict[str, Any] = {"values": values}
     summary = f"{head} values={','.join(map(str, values))}"
     if rest:
         fields["extra"] = _hex(rest)  # an odd byte left over
         summary += f" extra={fields['extra']}"
-    return fields, summary, [], []
+    return fields, summary
 
 
-def _hand_write_reply(cmd: Command, direction: str, data: bytes, device: int) -> Decoded:
+def _hand_write_reply(
+    cmd: Command, direction: str, data: bytes, device: int, notes: Notes
+) -> Decoded:
     """A hand-compatible write is answered like any write (one status byte), if it is short."""
     if len(data) == 1:
-        return _status(cmd, direction, data, device)
-    return _hand_values(cmd, direction, data, device)
+        return _status(cmd, direction, data, device, notes)
+    return _hand_values(cmd, direction, data, device, notes)
 
 
-def _hand(code: int, name: str, verb: str, reply: CustomDecode | None = None) -> Command:
+def _hand(code: Cmd, verb: str, reply: CustomDecode | None = None) -> Command:
     """A code accepted for compatibility with the vendor's dexterous hand (section 1.2)."""
-    return Command(code, name, f"{verb} (hand-compatible)", _hand_values, reply or _hand_values)
+    return Command(code, f"{verb} (hand-compatible)", _hand_values, reply or _hand_values)
 
 
 SEEK_ALIAS = "CMD_MC_SET_DRVALL_SEEKANGLE_GYH"
@@ -308,25 +348,25 @@ ACTPOS_ALIAS = "CMD_MC_READ_DRVALL_CURANGLE_GYH"
 COMMANDS: Final[dict[int, Command]] = {
     c.code: c
     for c in (
-        Command(0x01, "CMD_MC_PARA_SAVE", "save parameters"),
-        Command(0x04, "CMD_MC_PARA_ID_SET", "set ID", _set_id),
-        Command(0x10, "CMD_MC_MOVE_CATCH_XG", "catch", (SPEED, FORCE)),
-        Command(0x18, "CMD_MC_MOVE_CATCH2_XG", "continuous catch", (SPEED, FORCE)),
-        Command(0x11, "CMD_MC_MOVE_RELEASE", "release", (SPEED,)),
-        Command(0x54, "CMD_MC_SEEKPOS", "seek", (SEEK_POSITION,), alias=SEEK_ALIAS),
-        Command(0x16, "CMD_MC_MOVE_STOPHERE", "stop"),
-        Command(0x12, "CMD_MC_SET_EG_PARA", "set limits", (LIMIT_MAX, LIMIT_MIN)),
-        Command(0x13, "CMD_MC_READ_EG_PARA", "read limits", (), (LIMIT_MAX, LIMIT_MIN)),
-        Command(0xD9, "CMD_MC_READ_ACTPOS", "read position", (), (ACT_POSITION,), ACTPOS_ALIAS),
-        Command(0x14, "CMD_MC_READ_EG_STATE", "read state", (), _eg_state),
-        Command(0x41, "CMD_MC_READ_EG_RUNSTATE", "read run state", (), _run_state),
-        Command(0x17, "CMD_MC_ERROR_CLR", "clear faults"),
-        _hand(0x51, "CMD_MC_SET_DRVALL_SPEED", "set speed", _hand_write_reply),
-        _hand(0x52, "CMD_MC_SET_DRVALL_YBP_THRESHOLD", "set force threshold", _hand_write_reply),
-        _hand(0xD7, "CMD_MC_READ_DRVALL_SEEKGYHANGLE", "read target position"),
-        _hand(0xD2, "CMD_MC_READ_DRVALL_SPEED", "read speed"),
-        _hand(0xD3, "CMD_MC_READ_DRVALL_YBP_THRESHOLD", "read force threshold"),
-        _hand(0xDC, "CMD_MC_READ_HAND_STATUS", "read hand status"),
+        Command(Cmd.PARA_SAVE, "save parameters"),
+        Command(Cmd.PARA_ID_SET, "set ID", _set_id),
+        Command(Cmd.MOVE_CATCH_XG, "catch", (SPEED, FORCE)),
+        Command(Cmd.MOVE_CATCH2_XG, "continuous catch", (SPEED, FORCE)),
+        Command(Cmd.MOVE_RELEASE, "release", (SPEED,)),
+        Command(Cmd.SEEKPOS, "seek", (SEEK_POSITION,), alias=SEEK_ALIAS),
+        Command(Cmd.MOVE_STOPHERE, "stop"),
+        Command(Cmd.SET_EG_PARA, "set limits", (LIMIT_MAX, LIMIT_MIN)),
+        Command(Cmd.READ_EG_PARA, "read limits", (), (LIMIT_MAX, LIMIT_MIN)),
+        Command(Cmd.READ_ACTPOS, "read position", (), (ACT_POSITION,), ACTPOS_ALIAS),
+        Command(Cmd.READ_EG_STATE, "read state", (), _eg_state),
+        Command(Cmd.READ_EG_RUNSTATE, "read run state", (), _run_state),
+        Command(Cmd.ERROR_CLR, "clear faults"),
+        _hand(Cmd.SET_DRVALL_SPEED, "set speed", _hand_write_reply),
+        _hand(Cmd.SET_DRVALL_YBP_THRESHOLD, "set force threshold", _hand_write_reply),
+        _hand(Cmd.READ_DRVALL_SEEKGYHANGLE, "read target position"),
+        _hand(Cmd.READ_DRVALL_SPEED, "read speed"),
+        _hand(Cmd.READ_DRVALL_YBP_THRESHOLD, "read force threshold"),
+        _hand(Cmd.READ_HAND_STATUS, "read hand status"),
     )
 }
 
@@ -337,7 +377,6 @@ def _response_layout(cmd: Command) -> Layout:
 
 
 # (direction, CMD) -> (name, hand alias, decode function), compiled once
-DecodeFn = Callable[[bytes, int], Decoded]
 _DISPATCH: Final[dict[tuple[str, int], tuple[str, str | None, DecodeFn]]] = {}
 for _cmd in COMMANDS.values():
     _DISPATCH[REQUEST, _cmd.code] = (_cmd.name, _cmd.alias, _compile(_cmd, REQUEST, _cmd.request))
@@ -348,16 +387,20 @@ for _cmd in COMMANDS.values():
     )
 
 
-def _unknown(code: int, data: bytes) -> Decoded:
+def _unknown(code: int, data: bytes, notes: Notes) -> Decoded:
     """A CMD in neither table: still a frame when SUM checks; show its bytes (section 1.2)."""
     summary = f"unknown command 0x{code:02X}" + (f": {_hex(data)}" if data else "")
-    warning = f"unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)"
-    return {"data": _hex(data)}, summary, [], [warning]
+    notes.warn(
+        F.UNDOCUMENTED,
+        f"unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)",
+    )
+    return {"data": _hex(data)}, summary
 
 
 # -- the decode of one frame, memoised --------------------------------------------------------
 
-# (direction, device, code, name, fields, summary, errors, warnings, pair_key, expects, is_save)
+# (direction, device, code, name, fields, summary, errors, warnings, pair_key, expects, is_save,
+#  flags)
 _Entry = tuple[
     str | None,
     int | None,
@@ -370,6 +413,7 @@ _Entry = tuple[
     tuple[Any, ...] | None,
     bool,
     bool,
+    tuple[str, ...],
 ]
 
 _CACHE: dict[bytes, _Entry] = {}
@@ -393,26 +437,29 @@ def _decode(raw: bytes) -> _Entry:
             None,
             False,
             False,
+            (F.MALFORMED,),
         )
     direction = REQUEST if raw[0] == 0xEB else RESPONSE
     device, code, data = raw[2], raw[4], raw[5:-1]
+    notes = Notes()
+    # the header's problems come first
+    expected, got = sum(raw[2:-1]) & 0xFF, raw[-1]
+    if expected != got:
+        notes.error(F.BAD_CHECKSUM, f"checksum error: expected 0x{expected:02X}, got 0x{got:02X}")
+    if device == 0:
+        notes.warn(F.INVALID_ID, "ID 0 is not a valid ID")
+    elif device == BROADCAST and direction == RESPONSE:
+        notes.warn(F.BROADCAST, "response from broadcast ID 255 (broadcasts get no response)")
     entry = _DISPATCH.get((direction, code))
     if entry is None:
         name, alias = f"UNKNOWN_0x{code:02X}", None
-        body, summary, errors, warnings = _unknown(code, data)
+        body, summary = _unknown(code, data, notes)
     else:
         name, alias, decode = entry
-        body, summary, errors, warnings = decode(data, device)
+        body, summary = decode(data, device, notes)
     fields: dict[str, Any] = {"id": device, **body}
     if alias is not None:
         fields["alias"] = alias
-    expected, got = sum(raw[2:-1]) & 0xFF, raw[-1]
-    if expected != got:
-        errors = [f"checksum error: expected 0x{expected:02X}, got 0x{got:02X}", *errors]
-    if device == 0:
-        warnings = ["ID 0 is not a valid ID", *warnings]
-    elif device == BROADCAST and direction == RESPONSE:
-        warnings = ["response from broadcast ID 255 (broadcasts get no response)", *warnings]
     return (
         direction,
         device,
@@ -420,11 +467,12 @@ def _decode(raw: bytes) -> _Entry:
         name,
         fields,
         summary,
-        tuple(errors),
-        tuple(warnings),
+        tuple(notes.errors),
+        tuple(notes.warnings),
         (device, code),
         direction == REQUEST and device != BROADCAST,
-        direction == REQUEST and code == 0x01,
+        direction == REQUEST and code == Cmd.PARA_SAVE,
+        tuple(notes.flags),
     )
 
 
@@ -453,6 +501,7 @@ _RECORD_ORDER: Final = (
     "pair_key",
     "expects_response",
     "is_save",
+    "flags",
 )
 if tuple(f.name for f in dataclass_fields(Record)) != _RECORD_ORDER:
     raise RuntimeError("decoders.model.Record changed its field order; update eg2_serial.py")
@@ -467,10 +516,9 @@ class Eg2SerialDecoder(ByteStreamDecoder):
     """Feed Chunks of an RS232 tap (either or both directions interleaved), get Records."""
 
     protocol = EG2_SERIAL
-    max_frame = 255 + 5  # LEN is one byte
 
-    def __init__(self, bus: str = "serial") -> None:
-        super().__init__(bus)
+    def __init__(self, bus: str = "serial", *, byte_time_s: float | None = None) -> None:
+        super().__init__(bus, byte_time_s=byte_time_s)
 
     def frame_at(self, buf: bytearray, pos: int, final: bool) -> int:
         try:
@@ -504,9 +552,22 @@ class Eg2SerialDecoder(ByteStreamDecoder):
             if len(_CACHE) >= _CACHE_MAX:
                 _CACHE.clear()
             entry = _CACHE[raw] = _decode(raw)
-        direction, device, code, name, fields, summary, errors, warnings, key, expects, save = entry
-        # fresh error/warning lists: the pairing and lint stages append to them; fields is
-        # shared between records of equal bytes and must be treated as read-only
+        (
+            direction,
+            device,
+            code,
+            name,
+            fields,
+            summary,
+            errors,
+            warnings,
+            key,
+            expects,
+            save,
+            flags,
+        ) = entry
+        # fresh error/warning/flag lists: the pairing and lint stages append to them; fields
+        # is shared between records of equal bytes and must be treated as read-only
         return Record(
             t,
             self.bus,
@@ -530,6 +591,7 @@ class Eg2SerialDecoder(ByteStreamDecoder):
             key,
             expects,
             save,
+            list(flags),
         )
 
     def truncated_reason(self, raw: bytes) -> str:

@@ -9,6 +9,7 @@ and CRC byte order are flagged by the protocol decoders themselves, where the va
 
 from __future__ import annotations
 
+from .flags import CLOSER_THAN_5MS, DURING_SAVE
 from .model import FRAME, REQUEST, Record
 
 MIN_GAP_S = 0.005
@@ -16,6 +17,8 @@ AFTER_SAVE_S = 1.0
 
 
 class TimingLinter:
+    """Flags requests that break the manual's timing rules (each rule once per request)."""
+
     def __init__(self, min_gap_s: float = MIN_GAP_S, after_save_s: float = AFTER_SAVE_S) -> None:
         self.min_gap_s = min_gap_s
         self.after_save_s = after_save_s
@@ -35,6 +38,7 @@ class TimingLinter:
                     f"command {dt * 1000:.0f} ms after a parameter save "
                     f"(the manual asks to wait more than {self.after_save_s:g} s)"
                 )
+                rec.flags.append(DURING_SAVE)
             else:
                 del self._save[key]
         last = self._last.get(key)
@@ -43,6 +47,7 @@ class TimingLinter:
                 f"command {(t - last) * 1000:.2f} ms after the previous one to this device "
                 f"(the manual asks for at least {self.min_gap_s * 1000:.0f} ms)"
             )
+            rec.flags.append(CLOSER_THAN_5MS)
         self._last[key] = t
         if rec.is_save:
             self._save[key] = t

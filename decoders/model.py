@@ -1,7 +1,7 @@
 """The data that flows through eg2scope: raw input (Chunk, CanFrame) and decoded Records.
 
 Everything here is plain data. Decoders turn Chunks (byte streams) or CanFrames into Records;
-the pairing and lint stages annotate Records; sinks serialise them (see DESIGN.md, "JSONL
+the pairing and lint stages annotate Records; sinks serialise them (see docs/contracts.md, "JSONL
 records", for the keys other programs rely on).
 """
 
@@ -30,9 +30,11 @@ RESPONSE = "response"
 class Chunk:
     """Bytes as they arrived from a serial line or a capture file.
 
-    ``t`` is the arrival time of the chunk's first byte (seconds, epoch or capture clock), or
-    None when the source carries no timing. ``direction`` is set only when the source knows it
-    (one port per RS232 wire, or the two sides of a bridge).
+    ``t`` is when the chunk arrived (seconds, epoch or capture clock), or None when the source
+    carries no timing. A live tap stamps a read when it returns, i.e. when the chunk's last
+    byte arrived; a decoder told the line's byte time counts each frame's time back from it.
+    ``direction`` is set only when the source knows it (one port per RS232 wire, or the two
+    sides of a bridge).
     """
 
     data: bytes
@@ -63,8 +65,8 @@ class CanFrame:
 class Record:
     """One decoded frame, or one run of bytes that belongs to no frame.
 
-    The first block of attributes is the JSONL contract (DESIGN.md). ``summary`` is the human
-    one-liner ("catch speed=500 force=100 g"). ``seq`` numbers records in output order;
+    The first block of attributes is the JSONL contract (docs/contracts.md). ``summary`` is the
+    human one-liner ("catch speed=500 force=100 g"). ``seq`` numbers records in output order;
     ``pair`` is the ``seq`` of the linked request or response, ``latency_ms`` the time between
     them. ``pair_key``, ``expects_response`` and ``is_save`` are for the pairing and lint stages
     and are not serialised.
@@ -93,13 +95,16 @@ class Record:
     pair_key: tuple[Any, ...] | None = None
     expects_response: bool = False
     is_save: bool = False
+    # machine-readable codes for every error and warning (decoders/flags.py); last so the hot
+    # paths that build Records positionally need not pass it
+    flags: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
         return self.kind == FRAME and not self.errors
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSONL contract: every key DESIGN.md names, in a fixed order."""
+        """The JSONL contract: every key docs/contracts.md names, in a fixed order."""
         return {
             "t": self.t,
             "bus": self.bus,
@@ -116,6 +121,7 @@ class Record:
             "raw": self.raw.hex(" ").upper(),
             "errors": self.errors,
             "warnings": self.warnings,
+            "flags": self.flags,
             "summary": self.summary,
             "seq": self.seq,
             "pair": self.pair,
@@ -141,6 +147,7 @@ class Record:
             fields=d.get("fields") or {},
             errors=list(d.get("errors") or []),
             warnings=list(d.get("warnings") or []),
+            flags=list(d.get("flags") or []),
             summary=d.get("summary") or "",
             seq=d.get("seq", -1),
             pair=d.get("pair"),

@@ -6,6 +6,13 @@ the stream ended), so that *both* records carry the link when they leave this st
 unanswered request can be flagged on the request itself. Everything behind a held request waits
 with it, which keeps the output in stream order; the hold is bounded in count and, where
 timestamps exist, in time, so memory stays flat.
+
+Retransmissions. A host that times out sends the same request again (same bytes) before the
+first answer arrives. The copies wait together; answers go to them in arrival order (the first
+answer to the first copy), and each later copy is flagged ``retransmission``. A copy left over
+once an answer has come is not "unanswered": the exchange was answered. Once answered, the
+next identical request is a new one. Any other request on a one-question-at-a-time bus (serial,
+Modbus), or on the same CAN identifier, still means the waiting ones were not answered.
 """
 
 from __future__ import annotations
@@ -14,11 +21,21 @@ from collections import deque
 from collections.abc import Iterable
 from typing import Any
 
+from .flags import ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED
 from .model import EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 
 # Protocols on which a host has one question open at a time (RS232 question/answer, RS485
 # half duplex): a new request on the bus means the previous one will not be answered.
 ONE_OUTSTANDING = frozenset({EG2_SERIAL, MODBUS_RTU})
+
+RETRANSMITTED = "retransmission: the same request again before the first was answered"
+
+
+def _flag(rec: Record, code: str, text: str) -> None:
+    """A warning in words and its code (once per record)."""
+    rec.warnings.append(text)
+    if code not in rec.flags:
+        rec.flags.append(code)
 
 
 class Pairer:
@@ -38,7 +55,10 @@ class Pairer:
         # a capture decoded in parallel parts numbers its records the same as in one piece
         self.positional = positional
         self._held: deque[Record] = deque()
-        self._pending: dict[tuple[Any, ...], Record] = {}
+        # pairing key -> the requests waiting for an answer there: one, or a request and its
+        # retransmissions, oldest first
+        self._pending: dict[tuple[Any, ...], list[Record]] = {}
+        self._answered: set[tuple[Any, ...]] = set()  # keys whose first copy got its answer
         self._waiting: set[int] = set()  # id() of the pending requests
         self._next_expiry = float("inf")  # earliest stream time a pending request times out
         self._seq = 0
@@ -86,11 +106,29 @@ class Pairer:
 
     def flush(self) -> list[Record]:
         """End of stream: every request still waiting was never answered."""
-        for key, req in list(self._pending.items()):
-            self._drop(key, req, "no response before the end of the capture")
+        for key in list(self._pending):
+            self._close(key, "no response before the end of the capture")
         out = list(self._held)
         self._held.clear()
         return out
+
+    def gap(self, bus: str) -> list[Record]:
+        """The source of ``bus`` went away (a port lost): answers to the requests waiting on it
+        cannot be seen any more. They are flagged and released, so the records before a gap
+        come out before it."""
+        for key in [k for k in self._pending if k[0] == bus]:
+            self._close(key, "no response before the source was lost")
+        return self._release()
+
+    def waiting_before(self, position: int) -> bool:
+        """A request from before ``position`` (a byte offset, or a CAN frame index) still waits
+        for its answer: the parallel decoder's check that a part ends decided."""
+        for requests in self._pending.values():
+            for req in requests:
+                where = req.offset if req.offset is not None else req.index
+                if where is not None and where < position:
+                    return True
+        return False
 
     # -- internals -------------------------------------------------------------------------
 
@@ -99,27 +137,39 @@ class Pairer:
         return (rec.bus, rec.protocol, *rec.pair_key)
 
     def _request(self, rec: Record) -> None:
-        if rec.protocol in ONE_OUTSTANDING:
-            for key, old in list(self._pending.items()):
-                if key[0] == rec.bus and key[1] == rec.protocol:
-                    self._drop(key, old, "no response before the next request")
+        key = self._key(rec)
+        same = self._pending.get(key)
+        if same is not None and key not in self._answered and rec.raw == same[0].raw:
+            _flag(rec, RETRANSMISSION, RETRANSMITTED)
+            same.append(rec)
         else:
-            key = self._key(rec)
-            same = self._pending.get(key)
-            if same is not None:
-                self._drop(key, same, "no response before the next request with the same ID")
-        if rec.expects_response:
-            self._pending[self._key(rec)] = rec
-            self._waiting.add(id(rec))
-            if rec.t is not None:
-                limit = self.save_timeout_s if rec.is_save else self.timeout_s
-                self._next_expiry = min(self._next_expiry, rec.t + limit)
+            if rec.protocol in ONE_OUTSTANDING:
+                for other in [k for k in self._pending if k[0] == rec.bus and k[1] == rec.protocol]:
+                    self._close(other, "no response before the next request")
+            elif same is not None:
+                self._close(key, "no response before the next request with the same ID")
+            if not rec.expects_response:
+                return
+            self._pending[key] = [rec]
+        self._waiting.add(id(rec))
+        if rec.t is not None:
+            limit = self.save_timeout_s if rec.is_save else self.timeout_s
+            self._next_expiry = min(self._next_expiry, rec.t + limit)
 
     def _response(self, rec: Record) -> None:
-        req = self._pending.pop(self._key(rec), None)
-        if req is None:
-            rec.warnings.append("response without a request")
+        key = self._key(rec)
+        requests = self._pending.get(key)
+        if requests is None:
+            _flag(rec, ORPHAN_RESPONSE, "response without a request")
             return
+        req = requests[0]  # answers come in the order the copies were sent
+        if len(requests) == 1:
+            del self._pending[key]
+            if self._answered:
+                self._answered.discard(key)
+        else:
+            del requests[0]
+            self._answered.add(key)
         self._waiting.discard(id(req))
         req.pair = rec.seq
         rec.pair = req.seq
@@ -129,20 +179,33 @@ class Pairer:
 
     def _expire(self, now: float) -> None:
         nxt = float("inf")
-        for key, req in list(self._pending.items()):
-            if req.t is None:
-                continue
-            limit = self.save_timeout_s if req.is_save else self.timeout_s
-            if now - req.t > limit:
-                self._drop(key, req, f"no response within {limit * 1000:.0f} ms")
-            else:
-                nxt = min(nxt, req.t + limit)
+        for key, requests in list(self._pending.items()):
+            for req in list(requests):
+                if req.t is None:
+                    continue
+                limit = self.save_timeout_s if req.is_save else self.timeout_s
+                if now - req.t > limit:
+                    self._drop(key, req, f"no response within {limit * 1000:.0f} ms")
+                else:
+                    nxt = min(nxt, req.t + limit)
         self._next_expiry = nxt
 
+    def _close(self, key: tuple[Any, ...], why: str) -> None:
+        """No more answers will come for the requests waiting on key."""
+        for req in list(self._pending[key]):
+            self._drop(key, req, why)
+
     def _drop(self, key: tuple[Any, ...], req: Record, why: str) -> None:
-        """A pending request will not be answered: say so on it and stop waiting."""
-        req.warnings.append(why)
-        del self._pending[key]
+        """A waiting request will not be answered: say so on it (unless an earlier copy of it
+        was answered) and stop waiting."""
+        if key not in self._answered:
+            _flag(req, UNANSWERED, why)
+        requests = self._pending[key]
+        # by identity, not ==: the copies of a request are equal records
+        del requests[next(i for i, r in enumerate(requests) if r is req)]
+        if not requests:
+            del self._pending[key]
+            self._answered.discard(key)
         self._waiting.discard(id(req))
 
     def _release(self) -> list[Record]:
@@ -154,8 +217,8 @@ class Pairer:
         if len(held) > self.max_held:
             # bound memory: give up on the oldest request rather than hold the stream
             head = held[0]
-            for key, req in list(self._pending.items()):
-                if req is head:
-                    self._drop(key, req, "no response within the pairing window")
+            for key, requests in list(self._pending.items()):
+                if any(req is head for req in requests):
+                    self._drop(key, head, "no response within the pairing window")
             out += self._release()
         return out

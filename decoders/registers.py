@@ -40,6 +40,8 @@ def state_text(state: int) -> str:
 
 def fault_text(bits: int) -> list[str]:
     """Fault bits in words; reserved bits 5-7 are named as such."""
+    if not bits:  # the usual case, on every state sample a recording writes
+        return []
     words = [name for i, name in enumerate(FAULT_BITS) if bits & (1 << i)]
     words += [f"reserved bit {i}" for i in range(5, 8) if bits & (1 << i)]
     words += [f"bit {i}" for i in range(8, 16) if bits & (1 << i)]

@@ -9,6 +9,8 @@ from .framing import ByteStreamDecoder
 from .modbus_rtu import ModbusRtuDecoder
 from .model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Chunk
 
+# each is made as cls(bus, byte_time_s=...): byte_time_s (10 bits / baud) when the line's baud is
+# known, so times inside a read are estimated (decoders/framing.py)
 STREAM_DECODERS: dict[str, type[ByteStreamDecoder]] = {
     EG2_SERIAL: Eg2SerialDecoder,
     MODBUS_RTU: ModbusRtuDecoder,

@@ -1,32 +1,41 @@
-"""The manual's frames (``../shared/protocol/vectors.json``) for the tests, in one place."""
+"""The manual's frames (``tests/data/manual_frames.json``) for the tests, in one place.
+
+The file holds every frame the EG2-4XX manual prints, grouped by protocol (``eg2_serial``,
+``eg2_serial_bad``, ``modbus_rtu``, ``eg2_can``), with what a correct decoder reports for each;
+docs/protocol.md explains them.
+"""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 
-VECTORS_PATH = Path(__file__).resolve().parents[2] / "shared/protocol/vectors.json"
-MISSING = f"protocol vectors not found at {VECTORS_PATH}"
-needs_vectors = pytest.mark.skipif(not VECTORS_PATH.exists(), reason=MISSING)
+VECTORS_PATH = Path(__file__).resolve().parent / "data" / "manual_frames.json"
+
+_Test = TypeVar("_Test", bound=Callable[..., Any])
+
+
+def needs_vectors(test: _Test) -> _Test:
+    """The test unchanged: the data ships with the tests, so nothing skips for want of it
+    (kept for the tests that still decorate with it)."""
+    return test
 
 
 def load(key: str) -> list[dict[str, Any]]:
-    """The entries under ``key``, or [] when the shared folder is not beside the checkout."""
-    if not VECTORS_PATH.exists():
-        return []
-    return list(json.loads(VECTORS_PATH.read_text())[key])
+    """The entries under ``key``, freshly read (a test may change its copy); KeyError for a
+    group the file does not have."""
+    groups: dict[str, Any] = json.loads(VECTORS_PATH.read_text(encoding="utf-8"))
+    return list(groups[key])
 
 
 def params(key: str, indexed: bool = False) -> list[Any]:
-    """Entries as pytest params (``(index, entry)`` when indexed), or one skipped param."""
+    """The entries under ``key`` as pytest params named by their ``meaning``
+    (``(index, entry)`` when indexed)."""
     entries = load(key)
-    if not entries:
-        return [
-            pytest.param(*([None, None] if indexed else [None]), marks=pytest.mark.skip(MISSING))
-        ]
     if indexed:
         return [pytest.param(i, e, id=e["meaning"]) for i, e in enumerate(entries)]
     return [pytest.param(e, id=e["meaning"]) for e in entries]

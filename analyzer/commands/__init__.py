@@ -1,9 +1,18 @@
-"""CLI subcommands: one module each, with ``add_subparser`` (as cantools does)."""
+"""CLI subcommands: one module each, with ``add_subparser`` (as cantools does).
+
+Listed by name and imported when the parser is built, so importing one command's helpers does
+not import every command (the simulator, the TUI ...)."""
 
 from __future__ import annotations
 
-from types import ModuleType
-
-from . import bridge, decode, demo, live, record, sim, stats
-
-SUBCOMMANDS: tuple[ModuleType, ...] = (decode, stats, live, record, bridge, sim, demo)
+SUBCOMMANDS: tuple[str, ...] = (
+    "decode",
+    "stats",
+    "live",
+    "record",
+    "bridge",
+    "sim",
+    "demo",
+    "plot",
+    "tui",
+)

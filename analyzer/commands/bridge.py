@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
 from ..sources.serial_tap import SerialBridge
-from .livesource import serial_bus_name
+from .livesource import add_line_arguments, line_states, serial_bus_name
 from .session import add_session_arguments, run_session
 
 
@@ -34,10 +33,14 @@ def add_subparser(sub: Any) -> None:
     )
     parser.add_argument("--bus", metavar="NAME", help="bus name in records")
     parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
+    add_line_arguments(parser)
     add_session_arguments(parser, record_required=False)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    tap = SerialBridge(serial_bus_name(args), args.host_port, args.device_port, baudrate=args.baud)
-    return run_session(args, [tap], show=args.format, status=sys.stderr.isatty())
+    rts, dtr = line_states(args)
+    tap = SerialBridge(
+        serial_bus_name(args), args.host_port, args.device_port, args.baud, rts=rts, dtr=dtr
+    )
+    return run_session(args, [tap], show=args.format)

@@ -1,4 +1,5 @@
-"""Options and the read-decode loop shared by the offline commands (decode, stats)."""
+"""What the offline commands (decode, stats, and later plot/tui on captures) share: the input
+options, their checks, and running a capture through one session."""
 
 from __future__ import annotations
 
@@ -7,37 +8,106 @@ import gc
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
 
-from decoders.model import Record
+from decoders.model import EG2_CAN, Record
 from decoders.registry import resolve_protocol
 
-from ..pipeline import Decoding
+from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
+from ..listener import Listener
+from ..model import SourceEvent
+from ..session import Session, SessionCounts, SessionOptions
 from ..sources.capture import CaptureReader, open_capture
-from ..sources.pacing import paced, parse_speed
+from ..sources.pacing import parse_speed
+from ..sources.source import CaptureSource
 
-BATCH = 4096
+
+def non_negative_int(text: str) -> int:
+    """argparse type: 0, 1, 2, ... (a usage error otherwise)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, not {value}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: 1, 2, 3, ..."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be 1 or more, not {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, not {text}")
+    return value
+
+
+def probability(text: str) -> float:
+    """argparse type: a probability from 0 to 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a probability from 0 to 1, not {text}")
+    return value
+
+
+def protocol_type(text: str) -> str | None:
+    """argparse type: a protocol name or alias, or "auto" (None: detected)."""
+    if text.lower() == "auto":
+        return None
+    try:
+        return resolve_protocol(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def speed_type(text: str) -> float | None:
+    try:
+        return parse_speed(text)
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "file",
-        help="capture to read: candump -L .log, python-can .asc/.blf/.trc/.csv/.mf4, an "
-        "eg2scope .mcap recording, or any other file as raw serial bytes",
+        help="capture to read: candump -L .log (also .log.gz), python-can "
+        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
+        "serial bytes",
     )
     parser.add_argument(
         "--protocol",
         "-p",
-        default="auto",
+        type=protocol_type,
+        default=None,
         metavar="NAME",
         help="byte-stream protocol: serial (EB 90 / EE 16 frames), modbus (Modbus RTU) or "
-        "auto (default: detected from the bytes). CAN files are always decoded as CAN.",
+        "auto (default: detected from the bytes). CAN is chosen by the file: CAN captures "
+        "are always decoded as CAN.",
     )
     parser.add_argument(
         "--bus",
         metavar="NAME",
         help="bus name to put in records (default: the CAN channel in the file, or 'serial')",
     )
-    parser.add_argument("--device", "-d", type=int, metavar="N", help="only records of device N")
+    parser.add_argument(
+        "--device", "-d", type=non_negative_int, metavar="N", help="only records of device N"
+    )
     parser.add_argument(
         "--errors-only",
         "-e",
@@ -46,7 +116,8 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--speed",
-        default="max",
+        type=speed_type,
+        default=None,
         metavar="X",
         help="replay with the capture's own timing sped up X times (1 = real time, 10, ...) or "
         "'max' (default: as fast as possible)",
@@ -54,106 +125,181 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="never show a progress bar")
 
 
-def protocol_of(args: argparse.Namespace) -> str | None:
-    name = args.protocol
-    return None if name in (None, "auto") else resolve_protocol(name)
+@dataclass(frozen=True)
+class CaptureOptions:
+    """The input options of an offline command, typed (the core never sees argparse)."""
+
+    path: str
+    protocol: str | None = None
+    bus: str | None = None
+    device: int | None = None
+    errors_only: bool = False
+    speed: float | None = None
+    progress: bool = True
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> CaptureOptions:
+        return cls(
+            path=args.file,
+            protocol=args.protocol,
+            bus=args.bus,
+            device=args.device,
+            errors_only=args.errors_only,
+            speed=args.speed,
+            progress=not args.no_progress,
+        )
+
+    def record_filter(self) -> Callable[[Record], bool] | None:
+        device, errors_only = self.device, self.errors_only
+        if device is None and not errors_only:
+            return None
+
+        def keep(rec: Record) -> bool:
+            if device is not None and rec.device != device:
+                return False
+            return not errors_only or bool(rec.errors or rec.warnings)
+
+        return keep
 
 
-def record_filter(args: argparse.Namespace) -> Callable[[Record], bool] | None:
-    device, errors_only = args.device, args.errors_only
-    if device is None and not errors_only:
-        return None
+def open_reader(opts: CaptureOptions) -> CaptureReader:
+    """The capture's reader; a usage error when the protocol option cannot apply to it."""
+    reader = open_capture(opts.path, bus=opts.bus)
+    if opts.protocol == EG2_CAN and reader.kind != "can":
+        reader.close()
+        raise UsageError(
+            f"{opts.path} is read as a byte stream, and CAN is chosen by the file, not by "
+            "--protocol: give a CAN capture (candump .log, .asc, .blf, .trc, an eg2scope "
+            ".mcap), or -p serial / -p modbus for this one"
+        )
+    return reader
 
-    def keep(rec: Record) -> bool:
-        if device is not None and rec.device != device:
-            return False
-        return not errors_only or bool(rec.errors or rec.warnings)
 
-    return keep
+def byte_protocol(opts: CaptureOptions) -> str | None:
+    """The byte-stream protocol to force (None: detect); CAN needs no choice."""
+    return None if opts.protocol == EG2_CAN else opts.protocol
+
+
+class FilteredListener(Listener):
+    """Passes on only the records ``keep`` accepts (``--device``, ``--errors-only``)."""
+
+    def __init__(self, inner: Listener, keep: Callable[[Record], bool]) -> None:
+        self.inner = inner
+        self.keep = keep
+        self.wants_states = inner.wants_states
+        self.wants_raw = inner.wants_raw
+        self.label = getattr(inner, "label", type(inner).__name__)
+
+    def on_records(self, records: list[Record]) -> None:
+        keep = self.keep
+        kept = [r for r in records if keep(r)]
+        if kept:
+            self.inner.on_records(kept)
+
+    def on_states(self, samples: list[Any]) -> None:
+        self.inner.on_states(samples)
+
+    def on_event(self, event: SourceEvent) -> None:
+        self.inner.on_event(event)
+
+    def on_raw(self, items: list[Any]) -> None:
+        self.inner.on_raw(items)
+
+    def tick(self, now: float) -> None:
+        self.inner.tick(now)
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def on_error(self, exc: BaseException) -> None:
+        self.inner.on_error(exc)
+
+
+class ProgressListener(Listener):
+    """A progress bar on stderr while a capture is read (terminals only)."""
+
+    def __init__(self, reader: CaptureReader) -> None:
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            DownloadColumn,
+            Progress,
+            TextColumn,
+            TimeRemainingColumn,
+            TransferSpeedColumn,
+        )
+
+        self.reader = reader
+        self.records = 0
+        self.progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            DownloadColumn(),
+            TransferSpeedColumn(),
+            TextColumn("{task.fields[records]:,} records"),
+            TimeRemainingColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        )
+        self.task = self.progress.add_task(reader.path.name, total=reader.size or None, records=0)
+        self.progress.start()
+
+    def on_records(self, records: list[Record]) -> None:
+        self.records += len(records)
+
+    def tick(self, now: float) -> None:
+        self.progress.update(self.task, completed=self.reader.position, records=self.records)
+
+    def close(self) -> None:
+        self.progress.stop()
 
 
 @contextmanager
-def progress_bar(reader: CaptureReader, enabled: bool) -> Iterator[Callable[[int], None]]:
-    """A progress bar on stderr while reading, only when stderr is a terminal."""
-    if not enabled or not sys.stderr.isatty():
-        yield lambda n: None
-        return
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        DownloadColumn,
-        Progress,
-        TextColumn,
-        TimeRemainingColumn,
-        TransferSpeedColumn,
-    )
-
-    columns = (
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        DownloadColumn(),
-        TransferSpeedColumn(),
-        TextColumn("{task.fields[records]:,} records"),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task(reader.path.name, total=reader.size or None, records=0)
-        count = 0
-
-        def tick(n: int) -> None:
-            nonlocal count
-            count += n
-            bar.update(task, completed=reader.position, records=count)
-
-        yield tick
-
-
-@contextmanager
-def batch_gc(every: int = 256) -> Iterator[Callable[[], None]]:
+def batch_gc(every: int = 256) -> Iterator[None]:
     """Records hold no reference cycles, so refcounting frees them; the cyclic collector only
     re-walks the live objects (the throughput of a large decode halves with it on). It is
-    paused while decoding and run every ``every`` batches instead, so memory stays bounded
-    even if some library makes cycles."""
+    paused while decoding, with a young-generation collection every ``every`` seconds' worth
+    of allocations left to the thresholds, so memory stays bounded even if a library makes
+    cycles."""
     was_enabled = gc.isenabled()
-    gc.disable()
-    count = 0
-
-    def batch_done() -> None:
-        nonlocal count
-        count += 1
-        if count % every == 0:
-            gc.collect(1)
-
+    old = gc.get_threshold()
+    gc.set_threshold(100_000, 50, 1000)  # rare collections instead of none: bounded memory
     try:
-        yield batch_done
+        yield
     finally:
-        if was_enabled:
-            gc.enable()
+        gc.set_threshold(*old)
+        if not was_enabled:
+            gc.disable()
 
 
-def decoded_batches(args: argparse.Namespace) -> Iterator[list[Record]]:
-    """Read the capture named in args, decode it, yield filtered record batches in order.
-    Damage found in the file is reported on stderr after everything before it."""
-    keep = record_filter(args)
-    with (
-        batch_gc() as batch_done,
-        open_capture(args.file, bus=args.bus) as reader,
-        progress_bar(reader, not args.no_progress) as tick,
-    ):
-        decoding = Decoding(protocol_of(args), positional_seq=reader.single_stream)
-        feed = decoding.feed
-        speed = parse_speed(args.speed)
-        size = BATCH if speed is None else 1  # paced replay: show each record as it comes
-        batch: list[Record] = []
-        for item in paced(reader, speed):
-            batch += feed(item)
-            if len(batch) >= size:
-                tick(len(batch))
-                batch_done()
-                yield batch if keep is None else [r for r in batch if keep(r)]
-                batch = []
-        batch += decoding.finish()
-        tick(len(batch))
-        yield batch if keep is None else [r for r in batch if keep(r)]
+def run_capture(
+    opts: CaptureOptions, listeners: list[Listener], reader: CaptureReader | None = None
+) -> tuple[Session, CaptureReader]:
+    """Decode a capture through one session into ``listeners`` (filtered by the options), with
+    a progress bar on a terminal. Returns the finished session and its reader."""
+    reader = reader or open_reader(opts)
+    keep = opts.record_filter()
+    if keep is not None:
+        listeners = [FilteredListener(x, keep) for x in listeners]
+    if opts.progress and opts.speed is None and sys.stderr.isatty():
+        listeners = [*listeners, ProgressListener(reader)]
+    options = SessionOptions(protocol=byte_protocol(opts))
+    session = Session(CaptureSource(reader, opts.speed), listeners, options)
+    with reader, batch_gc():
+        session.run()
+    return session, reader
+
+
+def finish_capture(path: str, session: Session, reader: CaptureReader) -> int:
+    """Report damage and failed outputs on stderr; the exit code (docs/contracts.md)."""
     for err in reader.errors:
-        print(f"eg2scope: {args.file}: {err}", file=sys.stderr)
+        print(f"eg2scope: {path}: {err}", file=sys.stderr)
+    return exit_code(session.counts, damaged=bool(reader.errors), failed=bool(session.detached))
+
+
+def exit_code(counts: SessionCounts, damaged: bool = False, failed: bool = False) -> int:
+    if failed:
+        return 1
+    if counts.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_DAMAGED if damaged else EXIT_OK

@@ -3,18 +3,29 @@
 from __future__ import annotations
 
 import argparse
-import sys
-from typing import Any
+from typing import IO, Any
 
-from decoders.model import EG2_SERIAL
-
-from ..sinks.csv import CsvSink
-from ..sinks.jsonl import JsonlSink
-from ..sinks.text import TextSink
-from ..sources.pacing import parse_speed
-from .common import add_input_arguments, decoded_batches
+from ..listener import Listener
+from ..outfile import OutputError, check_not_input, output_stream
+from ..session import Session
+from ..sinks.csv import CsvListener
+from ..sinks.jsonl import JsonlListener
+from ..sinks.text import TextListener
+from .common import (
+    CaptureOptions,
+    add_input_arguments,
+    finish_capture,
+    non_negative_int,
+    open_reader,
+    run_capture,
+)
 
 FORMATS = ("text", "jsonl", "csv")
+EXIT_CODES = (
+    "exit status: 0 decoded; 1 error (a file that cannot be read or written); 2 usage error; "
+    "3 decoded as far as possible, but the input is damaged (see the messages on stderr); "
+    "130 interrupted"
+)
 
 
 def add_subparser(sub: Any) -> None:
@@ -31,7 +42,7 @@ def add_subparser(sub: Any) -> None:
             "examples:\n"
             "  eg2scope decode captures/can_pick_place.log\n"
             "  eg2scope decode dump.bin --protocol modbus --format jsonl > out.jsonl\n"
-            "  eg2scope decode capture.blf --device 2 --errors-only"
+            "  eg2scope decode capture.blf --device 2 --errors-only\n\n" + EXIT_CODES
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -44,15 +55,21 @@ def add_subparser(sub: Any) -> None:
         help="text: for people (default); jsonl: one JSON record per line, the stable "
         "contract for other programs; csv: for spreadsheets",
     )
-    parser.add_argument("--output", "-o", metavar="PATH", help="write to PATH instead of stdout")
+    parser.add_argument(
+        "--output",
+        "-o",
+        metavar="PATH",
+        help="write to PATH instead of stdout (written under a temporary name and renamed "
+        "when done; never the input file)",
+    )
     parser.add_argument(
         "--jobs",
         "-j",
-        type=int,
+        type=non_negative_int,
         default=0,
         metavar="N",
-        help="decode large raw dumps and candump logs in N processes (default: one per core; "
-        "1: in one piece). The output is the same either way.",
+        help="decode large raw dumps and candump logs in N processes (default 0: one per "
+        "core; 1: in one piece). The output is the same either way.",
     )
     parser.add_argument(
         "--absolute-time",
@@ -69,68 +86,39 @@ def add_subparser(sub: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    binary = args.format == "jsonl"
-    if args.output:
-        # closed in the finally below, after the sink is flushed
-        out: Any = open(args.output, "wb" if binary else "w", newline="" if not binary else None)  # noqa: SIM115
-    else:
-        out = sys.stdout.buffer if binary else sys.stdout
-    sink: Any
+def make_output(args: argparse.Namespace, out: IO[Any]) -> Listener:
     if args.format == "jsonl":
-        sink = JsonlSink(out)
-    elif args.format == "csv":
-        sink = CsvSink(out)
-    else:
-        colour = {"always": True, "never": False}.get(args.colour)
-        if args.output and colour is None:
-            colour = False
-        sink = TextSink(out, colour=colour, absolute_time=args.absolute_time)
-    try:
-        if not _decoded_in_parallel(args, sink, out):
-            for batch in decoded_batches(args):
-                sink.write(batch)
-    finally:
-        sink.close()
-        if args.output:
-            out.close()
-    return 0
+        return JsonlListener(out)
+    if args.format == "csv":
+        return CsvListener(out)
+    colour = {"always": True, "never": False}.get(args.colour)
+    if args.output and colour is None:
+        colour = False
+    return TextListener(out, colour=colour, absolute_time=args.absolute_time)
 
 
-def _decoded_in_parallel(args: argparse.Namespace, sink: Any, out: Any) -> bool:
-    """Large raw dumps and candump logs, to JSONL or CSV: decode on every core. False when
-    the file is not split (the caller decodes in one piece)."""
-    from pathlib import Path
+def run(args: argparse.Namespace) -> int:
+    opts = CaptureOptions.from_args(args)
+    if args.output:
+        check_not_input(args.output, [opts.path])
+    reader = open_reader(opts)  # opened first: a missing input must not touch the output
+    with output_stream(args.output, binary=args.format == "jsonl", inputs=[opts.path]) as out:
+        from ..parallel import decode_in_parallel
 
-    from decoders.registry import detect_protocol
+        done = decode_in_parallel(opts, args.format, args.jobs, reader, out)
+        if done is not None:
+            return done
+        listener = make_output(args, out)
+        session, reader = run_capture(opts, [listener], reader)
+        raise_output_failure(session, args.output)
+    return finish_capture(opts.path, session, reader)
 
-    from ..parallel import JoinError, reader_kind, run_parallel, splittable
-    from ..sources.capture import open_capture
-    from .common import progress_bar, protocol_of
 
-    if parse_speed(args.speed) is not None or args.jobs == 1:
-        return False
-    path = Path(args.file)
-    with open_capture(path, bus=args.bus) as reader:
-        kind = reader_kind(reader)
-        if not kind or not splittable(path, args.format, kind):
-            return False
-        protocol = protocol_of(args)
-        if kind == "bytes" and protocol is None:
-            with path.open("rb") as f:
-                protocol = detect_protocol(f.read(4096)) or EG2_SERIAL
-        binary = out if args.format == "jsonl" else out.buffer
-        sink.out.flush()
-        with progress_bar(reader, not args.no_progress) as tick:
-
-            def progress(done: int, size: int) -> None:
-                reader.position = done
-                tick(0)
-
-            try:
-                run_parallel(path, kind, args, protocol, binary, progress, jobs=args.jobs)
-            except JoinError as exc:
-                print(f"eg2scope: decoding {path.name} in one piece ({exc})", file=sys.stderr)
-                return False
-        binary.flush()
-    return True
+def raise_output_failure(session: Session, path: str | None) -> None:
+    """The output listener was detached: fail (a file that was there before is kept)."""
+    if not session.detached:
+        return
+    exc = session.detached[0][1]
+    if isinstance(exc, BrokenPipeError):
+        raise exc  # `| head`: the reader went away; the CLI stops quietly
+    raise OutputError(f"cannot write {path or 'the output'}: {exc}")

@@ -6,7 +6,10 @@ import argparse
 import sys
 from typing import Any
 
+from ..errors import UsageError
+from ..listener import Listener
 from ..sim.rig import BUSES, DemoRig
+from .common import probability
 from .session import add_session_arguments, run_session
 
 
@@ -40,18 +43,25 @@ def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--noise",
-        type=float,
+        type=probability,
         default=0.01,
         metavar="P",
         help="probability of a corrupted, garbled or dropped response (default 0.01)",
     )
 
 
-def run_demo(args: argparse.Namespace, show: str | None) -> int:
+def run_demo(
+    args: argparse.Namespace, show: str | None, extra: list[Listener] | None = None
+) -> int:
+    """The simulated grippers through one live session (``extra``: more listeners)."""
     buses = tuple(b.strip() for b in args.buses.split(",") if b.strip())
-    with DemoRig(buses, noise=args.noise) as rig:
+    try:
+        rig = DemoRig(buses, noise=args.noise)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    with rig:
         print(
-            "eg2scope demo: simulated grippers 1 and 2 on "
+            f"eg2scope {args.command}: simulated grippers 1 and 2 on "
             + ", ".join(f"{t.bus} ({type(t).__name__})" for t in rig.taps)
             + "; Ctrl-C to stop",
             file=sys.stderr,
@@ -60,9 +70,9 @@ def run_demo(args: argparse.Namespace, show: str | None) -> int:
             args,
             rig.taps,
             show=show,
-            status=show is None and sys.stderr.isatty(),
             per_bus=rig.protocols,
             on_start=rig.run_hosts,
+            extra=extra,
         )
 
 

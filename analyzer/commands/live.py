@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
+from ..rerun_target import add_rerun_argument
 from .livesource import add_source_arguments, open_taps
 from .session import add_session_arguments, run_session
 
@@ -31,6 +31,7 @@ def add_subparser(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_source_arguments(parser)
+    add_rerun_argument(parser)
     add_session_arguments(parser, record_required=False)
     parser.add_argument(
         "--format",
@@ -43,4 +44,4 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return run_session(args, open_taps(args), show=args.format, status=sys.stderr.isatty())
+    return run_session(args, open_taps(args), show=args.format)

@@ -1,7 +1,11 @@
 """Source options shared by the live commands (live, record): CAN, serial, pair, bridge.
 
-CAN options are python-can's, as ``can.logger`` takes them; serial ports are pyserial names or
-URLs. Several sources may be given at once (a CAN bus and a serial line, say).
+CAN options are python-can's own (``can.cli.add_bus_arguments``: ``-i/-c/-b``, ``--fd``,
+``--data-bitrate``, ``--timing``, ``--bus-kwargs KEY=VALUE ...``), completed from python-can's
+configuration (``CAN_INTERFACE``/``CAN_CHANNEL``, ``~/can.ini``) as ``can.logger`` does;
+serial ports are pyserial names or URLs. Several sources may be given at once (a CAN bus and a
+serial line, say). Options that can never work (an unknown interface, an impossible baud rate,
+a malformed channel) raise ``UsageError`` here, before anything is opened.
 """
 
 from __future__ import annotations
@@ -9,34 +13,24 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+import can
+import can.cli
+
 from decoders.registry import resolve_protocol
 
+from ..errors import UsageError
 from ..sources.live import Tap
+
+# the namespace keys add_bus_arguments fills (create_bus_from_namespace reads the same)
+CAN_KEYS = ("interface", "channel", "bitrate", "fd", "data_bitrate", "timing")
+LINE_STATES = {"low": False, "high": True}
 
 
 def add_source_arguments(parser: argparse.ArgumentParser, bridge: bool = True) -> None:
-    can = parser.add_argument_group("CAN source (python-can)")
-    can.add_argument(
-        "-i",
-        "--interface",
-        metavar="NAME",
-        help="python-can interface: socketcan, pcan, kvaser, vector, slcan, "
-        "virtual, ... (listen-only is requested where the interface allows)",
-    )
-    can.add_argument("-c", "--channel", metavar="CH", help="CAN channel, e.g. can0, PCAN_USBBUS1")
-    can.add_argument(
-        "-b",
-        "--bitrate",
-        type=int,
-        metavar="BPS",
-        help="bit rate (the EG2 uses 500000); leave unset to keep the bus's own",
-    )
-    can.add_argument(
-        "--can-option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="extra python-can bus argument (repeatable)",
+    can.cli.add_bus_arguments(
+        parser,
+        group_title="CAN source (python-can; listen-only is requested where the interface "
+        "allows; the EG2 uses -b 500000)",
     )
     ser = parser.add_argument_group("serial source (pyserial)")
     ser.add_argument(
@@ -49,6 +43,7 @@ def add_source_arguments(parser: argparse.ArgumentParser, bridge: bool = True) -
         "twice to watch one adapter per RS232 wire",
     )
     ser.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    add_line_arguments(ser)
     if bridge:
         ser.add_argument(
             "--bridge",
@@ -72,23 +67,44 @@ def add_source_arguments(parser: argparse.ArgumentParser, bridge: bool = True) -
     )
 
 
-def parse_can_options(pairs: list[str]) -> dict[str, Any]:
-    opts: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise ValueError(f"--can-option wants KEY=VALUE, got {pair!r}")
-        low = value.lower()
-        opts[key] = (
-            True
-            if low == "true"
-            else False
-            if low == "false"
-            else int(value)
-            if value.lstrip("-").isdigit()
-            else value
+def add_line_arguments(parser: Any) -> None:
+    """``--rts``/``--dtr``: the serial modem lines' state from the moment a port opens."""
+    for name in ("rts", "dtr"):
+        parser.add_argument(
+            f"--{name}",
+            choices=tuple(LINE_STATES),
+            default="low",
+            help=f"{name.upper()} line state while the port is open (default low: never "
+            "raised, so an RS485 adapter that drives its transmitter from it stays silent)",
         )
-    return opts
+
+
+def line_states(args: argparse.Namespace) -> tuple[bool, bool]:
+    """The serial taps' ``rts`` and ``dtr`` (True: high), from ``--rts``/``--dtr``."""
+    return LINE_STATES[getattr(args, "rts", "low")], LINE_STATES[getattr(args, "dtr", "low")]
+
+
+def can_bus_config(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The CAN bus the options ask for (python-can's configuration filling in what is not
+    given), or None when no CAN option was given."""
+    given = {key: getattr(args, key) for key in CAN_KEYS if key in args}
+    bus_kwargs: dict[str, Any] = dict(getattr(args, "bus_kwargs", {}) or {})
+    if not given and not bus_kwargs:
+        return None
+    try:
+        config: dict[str, Any] = dict(can.util.load_config(config=given))
+    except (can.CanInterfaceNotImplementedError, ValueError, TypeError) as exc:
+        known = ", ".join(sorted(can.VALID_INTERFACES))
+        if "interface" not in given:
+            raise UsageError(
+                "a CAN source needs an interface: -i NAME (or python-can's configuration: "
+                f"CAN_INTERFACE, ~/can.ini); python-can has: {known}"
+            ) from None
+        raise UsageError(f"bad CAN options: {exc}") from None
+    if config.get("channel") is None:
+        raise UsageError("a CAN source needs a channel: -c NAME (e.g. -i socketcan -c can0)")
+    config.update(bus_kwargs)
+    return config
 
 
 def serial_bus_name(args: argparse.Namespace) -> str:
@@ -99,40 +115,34 @@ def serial_bus_name(args: argparse.Namespace) -> str:
 
 
 def open_taps(args: argparse.Namespace) -> list[Tap]:
-    """The taps the options ask for; ValueError with a clear message when they ask for none."""
+    """The taps the options ask for. UsageError (a ValueError) with a clear message when they
+    ask for none, or for something that can never work; nothing is opened yet."""
     from ..sources.can_tap import CanTap
     from ..sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
 
     taps: list[Tap] = []
-    if args.interface or args.channel:
-        if not (args.interface and args.channel):
-            raise ValueError(
-                "a CAN source needs both --interface and --channel (e.g. -i socketcan -c can0)"
-            )
-        taps.append(
-            CanTap(
-                args.bus or args.channel,
-                args.interface,
-                args.channel,
-                bitrate=args.bitrate,
-                **parse_can_options(args.can_option),
-            )
-        )
+    config = can_bus_config(args)
+    if config is not None:
+        interface, channel = config.pop("interface"), config.pop("channel")
+        bitrate = config.pop("bitrate", None)
+        taps.append(CanTap(args.bus or str(channel), interface, channel, bitrate, **config))
     ports = list(args.serial)
+    rts, dtr = line_states(args)
     if len(ports) == 1:
-        taps.append(SerialTap(serial_bus_name(args), ports[0], baudrate=args.baud))
+        taps.append(SerialTap(serial_bus_name(args), ports[0], args.baud, rts=rts, dtr=dtr))
     elif len(ports) == 2:
-        taps.append(SerialPairTap(serial_bus_name(args), ports, baudrate=args.baud))
+        taps.append(SerialPairTap(serial_bus_name(args), ports, args.baud, rts=rts, dtr=dtr))
     elif len(ports) > 2:
-        raise ValueError(
+        raise UsageError(
             "--serial takes one port (RS485, or both directions on one wire) or "
             "two (one adapter per RS232 wire)"
         )
     if getattr(args, "bridge", None):
         host, device = args.bridge
-        taps.append(SerialBridge(serial_bus_name(args), host, device, baudrate=args.baud))
+        bus = serial_bus_name(args)
+        taps.append(SerialBridge(bus, host, device, args.baud, rts=rts, dtr=dtr))
     if not taps:
-        raise ValueError(
+        raise UsageError(
             "no source given: use -i/-c for CAN, --serial PORT, or --bridge "
             "HOST_PORT DEVICE_PORT (see --help)"
         )

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
+from ..rerun_target import add_rerun_argument
 from .demo import add_demo_arguments, run_demo
 from .livesource import add_source_arguments, open_taps
 from .session import add_session_arguments, run_session
@@ -37,6 +37,7 @@ def add_subparser(sub: Any) -> None:
         help="record the built-in demo (simulated grippers on all three buses)",
     )
     add_demo_arguments(parser)
+    add_rerun_argument(parser)
     add_session_arguments(parser, record_required=True)
     parser.add_argument("--show", action="store_true", help="also print the decoded text")
     parser.set_defaults(func=run)
@@ -46,4 +47,4 @@ def run(args: argparse.Namespace) -> int:
     if args.demo:
         return run_demo(args, show="text" if args.show else None)
     show = "text" if args.show else None
-    return run_session(args, open_taps(args), show=show, status=sys.stderr.isatty())
+    return run_session(args, open_taps(args), show=show)

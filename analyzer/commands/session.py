@@ -1,4 +1,5 @@
-"""Running a live session from the command line: outputs, status line, clean ending."""
+"""Running a live session from the command line (live, record, bridge, demo): the outputs, a
+status line, source events as they happen, a clean ending."""
 
 from __future__ import annotations
 
@@ -6,16 +7,20 @@ import argparse
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from decoders.model import Record
-from decoders.registry import resolve_protocol
 
 from .. import __version__
-from ..live import LiveSession, OutputBase, SessionCounts
-from ..outputs import JsonlOutput, McapOutput, TextOutput
+from ..errors import UsageError
+from ..listener import Listener, make_listener
+from ..model import SourceEvent
+from ..session import Session, SessionOptions
+from ..sinks.jsonl import JsonlListener
+from ..sinks.text import TextListener, format_event, use_colour
 from ..sources.live import Tap
+from ..sources.source import LiveSource
+from .common import exit_code, positive_float, positive_int
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
@@ -28,13 +33,13 @@ def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool
     )
     parser.add_argument(
         "--duration",
-        type=float,
+        type=positive_float,
         metavar="S",
         help="stop after S seconds (default: run until Ctrl-C)",
     )
     parser.add_argument(
         "--queue-size",
-        type=int,
+        type=positive_int,
         default=200_000,
         metavar="N",
         help="items buffered between capture and decoding before drops are "
@@ -42,31 +47,46 @@ def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool
     )
 
 
-class StatusLine(OutputBase):
-    """A one-line status on stderr, refreshed twice a second (terminals only)."""
+class StatusLine(Listener):
+    """What a recorder shows on a terminal when it prints no records: a status line with the
+    counts and each source's state, refreshed twice a second, and source events as they happen
+    (events are printed whether or not stderr is a terminal)."""
 
-    def __init__(self, session: LiveSession, label: str) -> None:
+    def __init__(self, session: Session, label: str, taps: list[Tap], out: IO[str]) -> None:
         self.session = session
         self.label = label
+        self.taps = taps
+        self.out = out
+        self.live = out.isatty()
+        self.colour = use_colour(out)
         self._next = 0.0
 
-    def records(self, records: list[Record]) -> None:
-        pass
+    def on_records(self, records: list[Record]) -> None:
+        pass  # counted by the session
 
-    def tick(self) -> None:
-        now = time.monotonic()
-        if now < self._next:
+    def on_event(self, event: SourceEvent) -> None:
+        self._clear()
+        self.out.write(format_event(event, self.colour) + "\n")
+        self._next = 0.0
+
+    def tick(self, now: float) -> None:
+        if not self.live or time.monotonic() < self._next:
             return
-        self._next = now + 0.5
-        sys.stderr.write(f"\r\x1b[2K{self.label}: {self.session.counts.line()}")
-        sys.stderr.flush()
+        self._next = time.monotonic() + 0.5
+        states = ", ".join(f"{t.bus} {'open' if t.is_open else 'waiting'}" for t in self.taps)
+        self.out.write(f"\r\x1b[2K{self.label}: {self.session.counts.line()} [{states}]")
+        self.out.flush()
 
     def close(self) -> None:
-        sys.stderr.write("\r\x1b[2K")
-        sys.stderr.flush()
+        self._clear()
+
+    def _clear(self) -> None:
+        if self.live:
+            self.out.write("\r\x1b[2K")
+            self.out.flush()
 
 
-def metadata(args: argparse.Namespace, taps: list[Tap]) -> dict[str, Any]:
+def metadata(taps: list[Tap]) -> dict[str, Any]:
     return {
         "tool": "eg2scope",
         "version": __version__,
@@ -85,36 +105,67 @@ def metadata(args: argparse.Namespace, taps: list[Tap]) -> dict[str, Any]:
     }
 
 
+def byte_times(taps: list[Tap]) -> dict[str, float]:
+    """Seconds per byte of each serial bus (10 bits per byte: start, 8 data, stop)."""
+    out: dict[str, float] = {}
+    for tap in taps:
+        baud = tap.settings.get("baudrate")
+        if isinstance(baud, int | float) and baud > 0:
+            out[tap.bus] = 10.0 / baud
+    return out
+
+
+def recorder(path: str, taps: list[Tap]) -> Listener:
+    if not path.lower().endswith(".mcap"):
+        raise UsageError(f"recordings are MCAP files: name the output *.mcap, not {path}")
+    return make_listener("mcap", path, metadata=metadata(taps))
+
+
 def run_session(
     args: argparse.Namespace,
     taps: list[Tap],
     show: str | None = "text",
-    status: bool = False,
-    extra_outputs: list[Any] | None = None,
     per_bus: dict[str, str] | None = None,
     on_start: Callable[[], None] | None = None,
+    extra: list[Listener] | None = None,
 ) -> int:
-    protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
-    outputs: list[Any] = list(extra_outputs or [])
-    if show == "text":
-        outputs.append(TextOutput())
-    elif show == "jsonl":
-        outputs.append(JsonlOutput())
-    recorder = None
-    if args.output:
-        from ..sinks.mcap import McapRecorder
+    """Watch ``taps`` with the outputs the options ask for: ``show`` "text" or "jsonl" on
+    stdout (None: a status line and events on stderr), and an MCAP recording with ``-o``."""
+    from decoders.registry import resolve_protocol
 
-        path = Path(args.output)
-        if path.suffix.lower() != ".mcap":
-            raise ValueError(f"recordings are MCAP files: name the output *.mcap, not {path}")
-        recorder = McapRecorder(path, metadata=metadata(args, taps))
-        outputs.append(McapOutput(recorder))
-    session = LiveSession(
-        taps, outputs, protocol=protocol, queue_size=args.queue_size, per_bus=per_bus
+    try:
+        protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    listeners: list[Listener] = list(extra or [])
+    if show == "text":
+        listeners.append(TextListener(sys.stdout, t0=time.time()))
+    elif show == "jsonl":
+        listeners.append(JsonlListener(sys.stdout.buffer))
+    if args.output:
+        listeners.append(recorder(args.output, taps))
+    from ..rerun_target import rerun_listener
+
+    rerun = rerun_listener(args, source=args.output)
+    if rerun is not None:
+        listeners.append(rerun)
+    source = LiveSource(taps, args.queue_size)
+    options = SessionOptions(
+        protocol=protocol,
+        per_bus=per_bus or {},
+        byte_time_s=byte_times(taps),
+        duration=args.duration,
     )
-    if status and show is None:
-        outputs.append(StatusLine(session, f"recording {args.output}"))
-    counts: SessionCounts = session.run(duration=args.duration, on_start=on_start)
+    session = Session(source, listeners, options)
+    if show is None:
+        what = f"recording {args.output}" if args.output else "watching"
+        session.listeners.append(StatusLine(session, what, taps, sys.stderr))
+    if on_start is not None:
+        source.on_started = on_start
+    counts = session.run()
     where = f" into {args.output}" if args.output else ""
     print(f"eg2scope: {counts.line()}{where}", file=sys.stderr)
-    return 0
+    for listener, failure in session.detached:
+        label = getattr(listener, "label", type(listener).__name__)
+        print(f"eg2scope: error: {label} failed: {failure}", file=sys.stderr)
+    return exit_code(counts, failed=bool(session.detached))

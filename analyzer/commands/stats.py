@@ -10,8 +10,11 @@ import orjson
 from rich.console import Console
 from rich.table import Table
 
-from ..stats import CaptureStats
-from .common import add_input_arguments, decoded_batches
+from decoders.flags import DESCRIPTIONS
+
+from ..sinks.stats import StatsListener
+from .common import CaptureOptions, add_input_arguments, finish_capture, run_capture
+from .decode import EXIT_CODES
 
 
 def add_subparser(sub: Any) -> None:
@@ -23,6 +26,7 @@ def add_subparser(sub: Any) -> None:
             "errors (checksum, CRC, garbage, truncation), response latency p50/p95/max, the "
             "warnings raised by the manual's rules, and notable patterns such as ID scans."
         ),
+        epilog=EXIT_CODES,
     )
     add_input_arguments(parser)
     parser.add_argument(
@@ -35,23 +39,32 @@ def add_subparser(sub: Any) -> None:
     parser.set_defaults(func=run)
 
 
+COUNT_COLUMNS = ("requests", "responses", "unanswered", "retransmissions", "errors", "warnings")
+
+
 def _ms(x: float | None) -> str:
     return "-" if x is None else f"{x:.2f}"
 
 
 def run(args: argparse.Namespace) -> int:
-    stats = CaptureStats()
-    for batch in decoded_batches(args):
-        for rec in batch:
-            stats.add(rec)
-    data = stats.as_dict()
+    opts = CaptureOptions.from_args(args)
+    listener = StatsListener()
+    session, reader = run_capture(opts, [listener])
+    code = finish_capture(opts.path, session, reader)
+    data = listener.stats.as_dict()
     if args.format == "json":
         sys.stdout.buffer.write(orjson.dumps(data, option=orjson.OPT_INDENT_2) + b"\n")
-        return 0
+    else:
+        print_tables(args.file, data)
+    sys.stdout.flush()
+    return code
+
+
+def print_tables(path: str, data: dict[str, Any]) -> None:
     # a pipe or file gets the whole table, not one squeezed to 80 columns
     console = Console(highlight=False, width=None if sys.stdout.isatty() else 200)
     console.print(
-        f"[bold]{args.file}[/]: {data['records']:,} records, {data['frames']:,} frames "
+        f"[bold]{path}[/]: {data['records']:,} records, {data['frames']:,} frames "
         f"({data['valid_frames']:,} valid), {data['garbage_bytes']:,} garbage bytes, "
         f"{data['truncated']} truncated"
         + (f", {data['duration_s']:.3f} s" if data["duration_s"] is not None else "")
@@ -63,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         table = Table(title=title, title_justify="left")
         for col in ("bus", "protocol", "device", *([key] if key else [])):
             table.add_column(col, no_wrap=True)
-        for col in ("requests", "responses", "unanswered", "errors", "warnings"):
+        for col in COUNT_COLUMNS:
             table.add_column(col, justify="right")
         for col in ("p50 ms", "p95 ms", "max ms"):
             table.add_column(col, justify="right")
@@ -73,20 +86,19 @@ def run(args: argparse.Namespace) -> int:
                 row["protocol"],
                 str(row["device"]),
                 *([row[key]] if key else []),
-                *(
-                    str(row[c])
-                    for c in ("requests", "responses", "unanswered", "errors", "warnings")
-                ),
+                *(str(row[c]) for c in COUNT_COLUMNS),
                 _ms(row["p50_ms"]),
                 _ms(row["p95_ms"]),
                 _ms(row["max_ms"]),
             )
         console.print(table)
-    for title, counts in (("Errors", data["errors"]), ("Warnings", data["warnings"])):
-        if counts:
-            console.print(f"[bold]{title}[/]")
-            for text, n in counts.items():
-                console.print(f"  {n:>8,}  {text}", markup=False)
+    if data["flags"]:
+        console.print("[bold]Problems[/] (flag: records)")
+        for code, n in data["flags"].items():
+            console.print(f"  {n:>8,}  {code}: {DESCRIPTIONS.get(code, code)}", markup=False)
+    if data["events"]:
+        console.print("[bold]Source events[/]")
+        for kind, n in data["events"].items():
+            console.print(f"  {n:>8,}  {kind}", markup=False)
     for note in data["notes"]:
         console.print(f"[bold]Note:[/] {note}")
-    return 0

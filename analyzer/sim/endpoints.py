@@ -39,21 +39,21 @@ from typing import Any, Final
 import can
 import serial
 
-from decoders import build
-from decoders.eg2_can import Eg2CanDecoder
-from decoders.eg2_serial import Eg2SerialDecoder, checksum
-from decoders.modbus_rtu import CRC_SWAPPED, ModbusRtuDecoder
+from decoders import build, eg2_can, eg2_serial
+from decoders.eg2_can import OP_POSITIONING_MOVE, OP_READ, OP_SERVO_FOLLOW, OP_WRITE, Eg2CanDecoder
+from decoders.eg2_serial import STATUS_FAILED, STATUS_OK, Cmd, Eg2SerialDecoder
+from decoders.flags import BAD_CHECKSUM, SWAPPED_CRC
+from decoders.modbus_pdu import BROADCAST as MODBUS_BROADCAST
+from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import EG2_CAN, FRAME, REQUEST, CanFrame, Chunk, Record
 
 from ..lifecycle import Running
+from ..sources.can_message import frame_to_message, message_to_frame
 from .gripper import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, ILLEGAL_VALUE, GripperModel
 
-SERIAL_BROADCAST: Final = 255
-MODBUS_BROADCAST: Final = 0
-CAN_BROADCAST: Final = build.CAN_BROADCAST
+SERIAL_BROADCAST: Final = eg2_serial.BROADCAST
+CAN_BROADCAST: Final = eg2_can.BROADCAST
 BAUDRATE: Final = 115200
-STATUS_OK: Final = 0x01
-STATUS_FAIL: Final = 0x55
 POLL_S: Final = 0.05  # the longest the server thread sleeps: stop() is quick
 SILENCE_S: Final = 0.002  # a pause this long after bytes ends a frame (as RTU's 3.5 chars)
 
@@ -347,9 +347,8 @@ class SerialGripperServer(_ByteServer):
         return Eg2SerialDecoder("sim")
 
     def _handle(self, rec: Record, now: float) -> None:
-        raw = rec.raw
-        if checksum(raw[2:-1]) != raw[-1]:
-            self.stats.ignored += 1  # a bad checksum: the gripper does not answer
+        if BAD_CHECKSUM in rec.flags:
+            self.stats.ignored += 1  # the gripper does not answer
             return
         device = rec.device if rec.device is not None else -1
         targets = self._targets(device, SERIAL_BROADCAST, now)
@@ -361,61 +360,60 @@ class SerialGripperServer(_ByteServer):
             self.stats.broadcasts += 1
         for m in targets:
             code = rec.code if rec.code is not None else -1
-            data = serial_reply(m, code, rec.fields, raw[5:-1], now)
+            data = serial_reply(m, code, rec.fields, now)
             if data is not None and device != SERIAL_BROADCAST:
                 self._respond(m, now, build.serial_frame(device, code, data, response=True))
 
 
 def _status(ok: bool) -> bytes:
-    return bytes((STATUS_OK if ok else STATUS_FAIL,))
+    return bytes((STATUS_OK if ok else STATUS_FAILED,))
 
 
-def serial_reply(
-    m: GripperModel, code: int, fields: Mapping[str, Any], data: bytes, now: float
-) -> bytes | None:
-    """Execute one serial command on a gripper; the response DATA, or None for no answer."""
+def serial_reply(m: GripperModel, code: int, fields: Mapping[str, Any], now: float) -> bytes | None:
+    """Execute one serial command (its decoded fields) on a gripper; the response DATA, or
+    None for no answer."""
     f = fields
     try:
-        if code == 0x01:
+        if code == Cmd.PARA_SAVE:
             return _status(m.save(now))
-        if code == 0x04:
+        if code == Cmd.PARA_ID_SET:
             return _status(m.set_id(int(f["new_id"]), now))
-        if code in (0x10, 0x18):
-            return _status(m.catch(f["speed"], f["force_g"], now, continuous=code == 0x18))
-        if code == 0x11:
+        if code in (Cmd.MOVE_CATCH_XG, Cmd.MOVE_CATCH2_XG):
+            continuous = code == Cmd.MOVE_CATCH2_XG
+            return _status(m.catch(f["speed"], f["force_g"], now, continuous=continuous))
+        if code == Cmd.MOVE_RELEASE:
             return _status(m.release(f["speed"], now))
-        if code == 0x54:
+        if code == Cmd.SEEKPOS:
             return _status(m.seek(f["position"], now))
-        if code == 0x16:
+        if code == Cmd.MOVE_STOPHERE:
             return _status(m.stop(now))
-        if code == 0x12:
+        if code == Cmd.SET_EG_PARA:
             return _status(m.set_limits(f["max"], f["min"], now))
-        if code == 0x17:
+        if code == Cmd.ERROR_CLR:
             return _status(m.clear_faults(now))
-        if code == 0x51:
+        if code == Cmd.SET_DRVALL_SPEED:
             return _status(m.set_speed(f["values"][0], now))
-        if code == 0x52:
+        if code == Cmd.SET_DRVALL_YBP_THRESHOLD:
             return _status(m.set_force(f["values"][0], now))
     except (KeyError, IndexError, TypeError):
         return _status(False)  # a payload that does not fit the command
     m.step(now)
-    if code == 0x13:
+    if code == Cmd.READ_EG_PARA:
         return build.u16le(m.max_opening, m.min_opening)
-    if code == 0xD9:
+    if code == Cmd.READ_ACTPOS:
         return build.u16le(m.position)
-    if code == 0x14:  # not documented; the layout one client reads (section 4)
+    if code == Cmd.READ_EG_STATE:  # not documented; the layout one client reads (section 4)
         return build.u16le(m.position, m.measured_force, m.force)
-    if code == 0x41:
-        return bytes((m.state, m.fault, min(255, max(0, m.temperature_c)))) + build.u16le(
-            m.position, m.force
-        )
-    if code == 0xD7:
+    if code == Cmd.READ_EG_RUNSTATE:
+        temperature = min(255, max(0, m.temperature_c))
+        return bytes((m.state, m.fault, temperature)) + build.u16le(m.position, m.force)
+    if code == Cmd.READ_DRVALL_SEEKGYHANGLE:
         return build.u16le(round(m.target))
-    if code == 0xD2:
+    if code == Cmd.READ_DRVALL_SPEED:
         return build.u16le(m.speed)
-    if code == 0xD3:
+    if code == Cmd.READ_DRVALL_YBP_THRESHOLD:
         return build.u16le(m.force)
-    if code == 0xDC:
+    if code == Cmd.READ_HAND_STATUS:
         return bytes((m.state,))
     return None  # unknown command: no answer
 
@@ -442,7 +440,7 @@ class ModbusGripperServer(_ByteServer):
         return ModbusRtuDecoder("sim")
 
     def _handle(self, rec: Record, now: float) -> None:
-        if rec.errors or (CRC_SWAPPED in rec.warnings and not self.accept_swapped_crc):
+        if rec.errors or (SWAPPED_CRC in rec.flags and not self.accept_swapped_crc):
             self.stats.ignored += 1
             return
         slave = rec.device if rec.device is not None else -1
@@ -496,7 +494,8 @@ def modbus_reply(m: GripperModel, rec: Record, now: float) -> bytes | None:
 
 # -- CAN --------------------------------------------------------------------------------------
 
-CAN_FIRST, CAN_LAST = 1002, 1131  # the byte addresses of registers 1001 ... 1065
+# the first and the last byte of registers 1001 ... 1065
+CAN_FIRST, CAN_LAST = eg2_can.MAP_FIRST, eg2_can.MAP_LAST + 1
 CAN_MAX_ID: Final = 16382
 
 
@@ -530,30 +529,6 @@ def can_write_bytes(m: GripperModel, address: int, data: bytes, now: float) -> i
         hi = data[a + 1 - address] if address <= a + 1 < address + n else old >> 8
         words.append(lo | hi << 8)
     return m.write_registers(numbers[0], words, now)
-
-
-def _to_message(frame: CanFrame) -> can.Message:
-    return can.Message(
-        arbitration_id=frame.arbitration_id,
-        data=frame.data,
-        is_extended_id=frame.is_extended,
-        is_error_frame=frame.is_error,
-    )
-
-
-def to_can_frame(msg: can.Message) -> CanFrame:
-    """A python-can message as the decoders' CanFrame."""
-    return CanFrame(
-        t=msg.timestamp,
-        arbitration_id=msg.arbitration_id,
-        data=bytes(msg.data),
-        is_extended=msg.is_extended_id,
-        is_remote=msg.is_remote_frame,
-        is_error=msg.is_error_frame,
-        is_fd=msg.is_fd,
-        dlc=None if msg.is_remote_frame else len(msg.data),
-        channel=str(msg.channel) if msg.channel is not None else None,
-    )
 
 
 class CanGripperServer(_Server):
@@ -625,7 +600,7 @@ class CanGripperServer(_Server):
         if msg is None:
             return
         now = self.clock()
-        frame = to_can_frame(msg)
+        frame = message_to_frame(msg)
         with self.lock:
             # everything a gripper receives is a request: judge each frame by its own shape
             self._dec.reset()
@@ -641,7 +616,7 @@ class CanGripperServer(_Server):
         op = rec.code
         address = int(rec.fields.get("address", -1))
         targets = self._targets(device, CAN_BROADCAST, now)
-        if not targets or op == build.OP_FOLLOW:
+        if not targets or op == OP_SERVO_FOLLOW:
             self.stats.ignored += 1
             return
         self.stats.requests += 1
@@ -649,14 +624,14 @@ class CanGripperServer(_Server):
             self.stats.broadcasts += 1
         for m in targets:
             reply: CanFrame | None = None
-            if op == build.OP_READ and rec.direction == REQUEST:
+            if op == OP_READ and rec.direction == REQUEST:
                 data = can_read_bytes(m, address, int(rec.fields["length"]), now)
                 if data is not None:
                     reply = build.can_read_response(device, address, data)
-            elif op == build.OP_WRITE and rec.direction == REQUEST:
+            elif op == OP_WRITE and rec.direction == REQUEST:
                 if can_write_bytes(m, address, rec.raw, now) == 0:
                     reply = self._write_ack(device, address, len(rec.raw))
-            elif op == build.OP_MOVE and len(rec.raw) == 6:
+            elif op == OP_POSITIONING_MOVE and len(rec.raw) == 6:
                 target, speed, force = (
                     int.from_bytes(rec.raw[i : i + 2], "little") for i in (0, 2, 4)
                 )
@@ -668,10 +643,7 @@ class CanGripperServer(_Server):
                 self._respond(m, now, reply)
 
     def _write_ack(self, device: int, address: int, n: int) -> CanFrame:
-        frame = build.can_write_response(device, address, n)
-        if self.pad_responses:
-            frame.data = frame.data + bytes(7)
-        return frame
+        return build.can_write_response(device, address, n, padded=self.pad_responses)
 
     def _noise(self) -> Any:
         ident = self.rng.randrange(0x800)
@@ -695,6 +667,6 @@ class CanGripperServer(_Server):
             frames = [payload]
         for frame in frames:
             try:
-                bus.send(_to_message(frame))
+                bus.send(frame_to_message(frame))
             except can.CanError:
                 pass

@@ -35,11 +35,13 @@ import serial
 
 from decoders import build
 from decoders.eg2_can import Eg2CanDecoder
-from decoders.eg2_serial import Eg2SerialDecoder
+from decoders.eg2_serial import Cmd, Eg2SerialDecoder
 from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import REQUEST, RESPONSE, CanFrame, Chunk, Record
+from decoders.registers import BY_KEY
 
-from .endpoints import BAUDRATE, to_can_frame
+from ..sources.can_message import frame_to_message, message_to_frame
+from .endpoints import BAUDRATE
 
 PROTOCOLS = ("serial", "modbus", "can")
 ALIASES = {
@@ -51,8 +53,18 @@ ALIASES = {
 }
 
 # CAN byte addresses (section 3.1)
-CAN_SAVE, CAN_TARGET, CAN_SPEED, CAN_CATCH_MODE, CAN_FAULT_CLEAR = 1002, 1020, 1022, 1010, 1014
-CAN_FORCE_ACT, CAN_FAULT = 1120, 1128
+CAN_SAVE, CAN_TARGET, CAN_SPEED, CAN_CATCH_MODE, CAN_FAULT_CLEAR, CAN_FORCE_ACT, CAN_FAULT = (
+    BY_KEY[key].can_address
+    for key in (
+        "save",
+        "target_opening",
+        "speed",
+        "catch_mode",
+        "fault_clear",
+        "measured_force",
+        "fault",
+    )
+)
 SILENCE_S = 0.002  # a pause this long ends a frame (3.5 characters are 0.3 ms at 115200)
 
 
@@ -63,7 +75,7 @@ class HostQuirks:
     short_registers: bool = False  # Modbus: register 10 instead of 1010 (xArm SDK style)
     id_scan: int = 0  # probe IDs 1..N once before the cycles
     save_first: bool = False  # save the parameters once at start, then wait > 1 s
-    continuous: bool = False  # continuous catch (serial 0x18, Modbus/CAN catch mode 1)
+    continuous: bool = False  # continuous catch (serial MOVE_CATCH2_XG, Modbus/CAN catch mode 1)
     padded_reads: bool = False  # CAN: read requests with DLC 8, zero padded
 
 
@@ -112,7 +124,6 @@ class _Link:
         self.min_gap_s = min_gap_s
         self.retries = retries
         self._last_send = -1e9
-        self.records: list[Record] = []  # everything seen, when keep_records
 
     def close(self) -> None:
         pass
@@ -250,11 +261,9 @@ class _CanLink(_Link):
 
     def _send(self, request: Any) -> None:
         while (stale := self.bus.recv(0)) is not None:
-            self._decode(to_can_frame(stale))
+            self._decode(message_to_frame(stale))
         frame: CanFrame = request
-        self.bus.send(
-            can.Message(arbitration_id=frame.arbitration_id, data=frame.data, is_extended_id=True)
-        )
+        self.bus.send(frame_to_message(frame))
         frame.t = time.time()
         self._decode(frame)
 
@@ -267,7 +276,7 @@ class _CanLink(_Link):
             msg = self.bus.recv(min(left, 0.05))
             if msg is None:
                 continue
-            rec = self._decode(to_can_frame(msg))
+            rec = self._decode(message_to_frame(msg))
             if rec.direction == RESPONSE and match(rec):
                 return rec
 
@@ -318,27 +327,27 @@ class _SerialDriver(_Driver):
         return rec is not None and rec.fields.get("status") == "ok"
 
     def close(self, device: int) -> bool:
-        cmd = 0x18 if self.quirks.continuous else 0x10
+        cmd = Cmd.MOVE_CATCH2_XG if self.quirks.continuous else Cmd.MOVE_CATCH_XG
         return self._ok(device, cmd, build.u16le(self.speed, self.force))
 
     def open(self, device: int) -> bool:
-        return self._ok(device, 0x11, build.u16le(self.speed))
+        return self._ok(device, Cmd.MOVE_RELEASE, build.u16le(self.speed))
 
     def poll(self, device: int) -> GripperReading | None:
-        rec = self._cmd(device, 0x41)
+        rec = self._cmd(device, Cmd.READ_EG_RUNSTATE)
         if rec is None or "state" not in rec.fields:
             return None
         f = rec.fields
         return GripperReading(f["state"], f["position"], f["fault"], None)
 
     def save(self, device: int) -> bool:
-        return self._ok(device, 0x01, timeout_s=1.5, retries=0)
+        return self._ok(device, Cmd.PARA_SAVE, timeout_s=1.5, retries=0)
 
     def clear_faults(self, device: int) -> bool:
-        return self._ok(device, 0x17)
+        return self._ok(device, Cmd.ERROR_CLR)
 
     def probe(self, device: int) -> bool:
-        return self._cmd(device, 0x41, retries=0) is not None
+        return self._cmd(device, Cmd.READ_EG_RUNSTATE, retries=0) is not None
 
 
 class _ModbusDriver(_Driver):

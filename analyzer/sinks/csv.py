@@ -1,4 +1,5 @@
-"""CSV output for spreadsheets: the JSONL keys as columns, fields as a JSON string."""
+"""CSV output for spreadsheets: the JSONL keys as columns, fields as a JSON string, the lists
+(errors, warnings, flags) joined with "; ". Source events have no row (see the JSONL output)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from typing import IO
 import orjson
 
 from decoders.model import Record
+
+from ..listener import Listener
 
 COLUMNS = (
     "seq",
@@ -27,27 +30,33 @@ COLUMNS = (
     "raw",
     "errors",
     "warnings",
+    "flags",
     "pair",
     "latency_ms",
 )
+_JOINED = ("errors", "warnings", "flags")
 
 
-class CsvSink:
+class CsvListener(Listener):
     def __init__(self, out: IO[str], header: bool = True) -> None:
         self.out = out
         self.writer = csv.writer(out)
+        self.label = f"CSV output to {getattr(out, 'name', 'a stream')}"
         if header:
             self.writer.writerow(COLUMNS)
 
-    def write(self, records: list[Record]) -> None:
+    def on_records(self, records: list[Record]) -> None:
         rows = []
         for r in records:
             d = r.to_dict()
             d["fields"] = orjson.dumps(r.fields).decode()
-            d["errors"] = "; ".join(r.errors)
-            d["warnings"] = "; ".join(r.warnings)
+            for key in _JOINED:
+                d[key] = "; ".join(d[key])
             rows.append(["" if d[c] is None else d[c] for c in COLUMNS])
         self.writer.writerows(rows)
+
+    def tick(self, now: float) -> None:
+        self.out.flush()
 
     def close(self) -> None:
         self.out.flush()

@@ -1,4 +1,8 @@
-"""JSONL output: the contract of DESIGN.md, one object per record, in stream order."""
+"""JSONL output: the contract of docs/contracts.md, one object per record, in stream order.
+
+Source events (a port lost or reopened, drops) are records of their own ``kind`` ("event"), in
+time order with the frames.
+"""
 
 from __future__ import annotations
 
@@ -8,14 +12,24 @@ import orjson
 
 from decoders.model import Record
 
+from ..listener import Listener
+from ..model import SourceEvent
 
-class JsonlSink:
+
+class JsonlListener(Listener):
     def __init__(self, out: IO[bytes]) -> None:
         self.out = out
+        self.label = f"JSONL output to {getattr(out, 'name', 'a stream')}"
 
-    def write(self, records: list[Record]) -> None:
+    def on_records(self, records: list[Record]) -> None:
         dumps = orjson.dumps
         self.out.write(b"".join([dumps(r.to_dict()) + b"\n" for r in records]))
+
+    def on_event(self, event: SourceEvent) -> None:
+        self.out.write(orjson.dumps(event.to_dict()) + b"\n")
+
+    def tick(self, now: float) -> None:
+        self.out.flush()
 
     def close(self) -> None:
         self.out.flush()

@@ -1,7 +1,8 @@
-"""Human-readable output: one line per record.
+"""Human-readable output: one line per record, and one per source event.
 
 ``  0.012345  can0  → ID 1     CMD_MC_MOVE_CATCH_XG   catch speed=500 force=100 g``
-Errors are shown in red and warnings in yellow when the terminal has colour.
+Errors are shown in red and warnings in yellow when the terminal has colour. A latency measured
+between times estimated from the line's baud rate is shown as ``~0.41 ms``.
 """
 
 from __future__ import annotations
@@ -9,9 +10,13 @@ from __future__ import annotations
 import os
 from typing import IO
 
+from decoders.flags import ESTIMATED_TIME
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
-RED, YELLOW, DIM, RESET = "\x1b[31m", "\x1b[33m", "\x1b[2m", "\x1b[0m"
+from ..listener import Listener
+from ..model import SourceEvent
+
+RED, YELLOW, RESET = "\x1b[31m", "\x1b[33m", "\x1b[0m"
 ARROWS = {REQUEST: "→", RESPONSE: "←"}
 
 
@@ -59,7 +64,8 @@ class TextFormatter:
             rec.summary,
         ]
         if rec.latency_ms is not None and rec.direction == RESPONSE:
-            parts.append(f"({rec.latency_ms:.2f} ms)")
+            about = "~" if ESTIMATED_TIME in rec.flags else ""
+            parts.append(f"({about}{rec.latency_ms:.2f} ms)")
         line = " ".join(parts)
         if rec.errors:
             text = "  !! " + "; ".join(rec.errors)
@@ -70,8 +76,9 @@ class TextFormatter:
         return line
 
 
-class TextSink:
-    """Writes formatted lines to a text stream."""
+class TextListener(Listener):
+    """Formatted lines on a text stream; source events as lines that stand out. ``t0``: the time
+    shown as 0 (a live session's start); default the first record's."""
 
     def __init__(
         self,
@@ -79,22 +86,32 @@ class TextSink:
         colour: bool | None = None,
         absolute_time: bool = False,
         t0: float | None = None,
-    ):
+    ) -> None:
         self.out = out
         colour = use_colour(out) if colour is None else colour
         self.formatter = TextFormatter(colour=colour, absolute_time=absolute_time, t0=t0)
+        self.label = f"text output to {getattr(out, 'name', 'a stream')}"
 
-    def write(self, records: list[Record]) -> None:
+    def on_records(self, records: list[Record]) -> None:
         fmt = self.formatter.format
-        self.out.write("".join(fmt(r) + "\n" for r in records))
+        self.out.write("".join([fmt(r) + "\n" for r in records]))
+
+    def on_event(self, event: SourceEvent) -> None:
+        line = format_event(event, self.formatter.colour)
+        self.out.write(line + "\n")
+
+    def tick(self, now: float) -> None:
+        self.out.flush()
 
     def close(self) -> None:
         self.out.flush()
 
 
-def format_event(message: str, bus: str, level: int, colour: bool) -> str:
+def format_event(event: SourceEvent, colour: bool) -> str:
     """A source event (port lost, reopened, drops ...) as a line that stands out."""
-    line = f"-- {bus}: {message}"
-    if not colour or level < 3:
+    line = f"-- {event.bus}: {event.message}"
+    if event.count > 1:
+        line += f" (x{event.count})"
+    if not colour or event.level < 3:
         return line
-    return f"{RED if level >= 4 else YELLOW}{line}{RESET}"
+    return f"{RED if event.level >= 4 else YELLOW}{line}{RESET}"

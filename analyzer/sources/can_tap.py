@@ -1,7 +1,7 @@
 """Live CAN tap (python-can): listen-only wherever the interface allows it, never sends.
 
 ``CanTap`` opens ``can.Bus(interface=..., channel=..., bitrate=..., receive_own_messages=False)``
-with listen-only requested through the interface's own option (DESIGN.md: pcan/systec
+with listen-only requested through the interface's own option (pcan/systec
 ``state=BusState.PASSIVE``, vector/slcan/nixnet ``listen_only=True``, kvaser
 ``driver_mode=False``; also cantact ``monitor=True`` and seeedstudio
 ``operation_mode="silent"``). socketcan has no such option: listen-only is a property of the
@@ -10,10 +10,17 @@ link (``ip link set can0 type can ... listen-only on``), so the tap reads
 "unknown"), ``self.settings`` and a "passive" SourceEvent.
 
 Frames reach the TapQueue through python-can's ``can.Notifier`` and a ``can.Listener`` that
-converts each ``can.Message`` to a ``CanFrame`` (the queue never blocks). When the interface
-goes down (the receive thread raises), the tap reports ``lost``, shuts the bus down and retries
-every ``retry_interval`` seconds until it opens again (``reopened``, with the gap). The tap
-never calls ``send``.
+converts each ``can.Message`` to a ``CanFrame`` (``can_message``; the queue never blocks). The
+shared supervisor loop (``supervisor``) keeps the bus open: when the interface goes down (the
+receive thread raises) the tap reports ``lost``, shuts the bus down and reopens it with
+back-off (``reopened``, with the gap); an adapter that fails on every receive is reported as
+one ``lost`` event with a count, not thousands. The tap never calls ``send``.
+
+Settings that can never work raise ``UsageError`` when the tap is made: an interface python-can
+does not know, an empty or malformed channel, a bit rate that is not a positive number. A
+setting the interface itself refuses when opened (``ValueError``/``TypeError``, or its driver
+missing: ``CanInterfaceNotImplementedError``) ends the tap with one ERROR event (``failed``);
+anything else (no such adapter yet, interface down) is retried.
 """
 
 from __future__ import annotations
@@ -22,16 +29,18 @@ import re
 import subprocess
 import threading
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import can
 
-from decoders.model import CanFrame
+from ..errors import UsageError
+from ..model import INFO, WARNING, Item
+from .can_message import message_to_frame
+from .live import Tap, TapQueue
+from .supervisor import MAX_RETRY_INTERVAL, RETRY_INTERVAL, Backoff, Device, Supervisor
 
-from ..pipeline import Item
-from .live import ERROR, INFO, WARNING, Tap, TapQueue
-
-RETRY_INTERVAL = 0.5
 RECV_TIMEOUT = 0.1  # Notifier's receive timeout: bounds how long stopping takes
 JOIN_TIMEOUT = 2.0
 REBASE_THRESHOLD = 24 * 3600.0  # timestamps further than this from time.time() are not epoch
@@ -50,14 +59,11 @@ LISTEN_ONLY_KWARGS: dict[str, dict[str, Any]] = {
 # simulated buses: no wire, no controller; passive because the tap never sends
 SIMULATED = {"virtual": "virtual bus (simulated)", "udp_multicast": "UDP multicast bus (simulated)"}
 
+IFNAMSIZ = 16  # Linux network interface names: at most 15 characters
+_MALFORMED_CHANNEL = re.compile(r"^$|\s|[\x00-\x1f]")
+
 NEVER_SENDS = "the tap never sends"
 ACKS = "its controller acknowledges frames and may send error frames"
-
-
-def _describe(exc: BaseException) -> str:
-    text = str(exc)
-    name = type(exc).__name__
-    return f"{name}: {text}" if text else name
 
 
 def _plain(value: Any) -> Any:
@@ -171,18 +177,9 @@ class _FrameListener(can.Listener):
             if self._offset is None:
                 self._offset = self._rebase(ts)
             t = ts + self._offset
-        channel = msg.channel
-        frame = CanFrame(
-            t=t,
-            arbitration_id=msg.arbitration_id,
-            data=bytes(msg.data),
-            is_extended=msg.is_extended_id,
-            is_remote=msg.is_remote_frame,
-            is_error=msg.is_error_frame,
-            is_fd=msg.is_fd,
-            dlc=msg.dlc,
-            channel=str(channel) if channel is not None else self.tap.channel_name,
-        )
+        frame = message_to_frame(msg, t)
+        if frame.channel is None:
+            frame.channel = self.tap.channel_name
         self.frames += 1
         self.out.put(Item(self.tap.bus, frame))
 
@@ -210,8 +207,92 @@ class _FrameListener(can.Listener):
         self.halted.set()
 
 
+def check_can_source(interface: str, channel: Any, bitrate: int | None) -> None:
+    """UsageError if these can never open a bus: an interface python-can does not know, an
+    empty or malformed channel (socketcan: not a network interface name), a bit rate that is
+    not a positive number."""
+    if interface not in can.VALID_INTERFACES:
+        known = ", ".join(sorted(can.VALID_INTERFACES))
+        raise UsageError(f"unknown python-can interface {interface!r}; python-can has: {known}")
+    name = str(channel)
+    if channel is None or _MALFORMED_CHANNEL.search(name):
+        raise UsageError(f"malformed CAN channel {name!r} for interface {interface}")
+    if interface == "socketcan" and (len(name) >= IFNAMSIZ or "/" in name):
+        raise UsageError(
+            f"malformed CAN channel {name!r}: a socketcan channel is a network interface name "
+            f"(at most {IFNAMSIZ - 1} characters, no '/'), e.g. can0"
+        )
+    if bitrate is not None and (
+        not isinstance(bitrate, int) or isinstance(bitrate, bool) or bitrate <= 0
+    ):
+        raise UsageError(f"impossible CAN bit rate {bitrate!r}: it must be a positive number")
+
+
+@dataclass(slots=True)
+class _OpenBus:
+    bus: can.BusABC
+    notifier: can.Notifier
+    listener: _FrameListener
+
+
+class _Channel(Device[_OpenBus]):
+    """The tap's interface/channel as the supervisor's device."""
+
+    lost_in_gap = "frames on the bus"
+    # a setting the interface refuses, or its driver missing: retrying cannot help
+    fatal = (can.CanInterfaceNotImplementedError, ValueError, TypeError)
+
+    def __init__(self, tap: CanTap, out: TapQueue, wake: threading.Event) -> None:
+        self.tap = tap
+        self.out = out
+        self.wake = wake  # set by the listener on a receive error, and by stop()
+        self.label = f"{tap.interface} channel {tap.channel_name}"
+
+    def open(self) -> _OpenBus:
+        listener = _FrameListener(self.tap, self.out, self.wake)
+        bus = self.tap.open_bus()
+        self.wake.clear()
+        try:
+            notifier = can.Notifier(bus, [listener], timeout=self.tap.recv_timeout)
+        except Exception:
+            _shutdown(bus)
+            raise
+        return _OpenBus(bus, notifier, listener)
+
+    def describe(self, handle: _OpenBus) -> str:
+        return f" at {self.tap.bitrate} bit/s" if self.tap.bitrate else ""
+
+    def reopened(self, handle: _OpenBus) -> None:
+        # the link may have been (re)created meanwhile, with its default settings
+        if self.tap.interface == "socketcan":
+            before = self.tap.passive
+            self.tap.check_socketcan()
+            if self.tap.passive != before:
+                self.tap.passive_event(self.out)
+
+    def capture(self, handle: _OpenBus, running: Callable[[], bool]) -> str | None:
+        listener = handle.listener
+        while running() and listener.error is None:
+            self.wake.wait(0.5)
+        return None if listener.error is None else self.why(listener.error)
+
+    def close(self, handle: _OpenBus) -> None:
+        handle.listener.stop()
+        try:
+            handle.notifier.stop(timeout=JOIN_TIMEOUT)
+        except Exception:
+            pass
+        _shutdown(handle.bus)
+        self.tap.frames += handle.listener.frames
+
+
 class CanTap(Tap):
-    """Listen-only tap on one CAN interface/channel, python-can's way of naming them."""
+    """Listen-only tap on one CAN interface/channel, python-can's way of naming them.
+
+    ``settings``: ``kind`` "can", ``interface``, ``channel``, ``bitrate``,
+    ``listen_only_options`` (the keyword arguments added for listen-only), ``options`` (the
+    other bus keyword arguments), ``passive`` and ``passive_reason``.
+    """
 
     def __init__(
         self,
@@ -222,15 +303,17 @@ class CanTap(Tap):
         *,
         listen_only: bool = True,
         retry_interval: float = RETRY_INTERVAL,
+        max_retry_interval: float = MAX_RETRY_INTERVAL,
         recv_timeout: float = RECV_TIMEOUT,
         **kwargs: Any,
     ) -> None:
+        check_can_source(interface, channel, bitrate)
         self.interface = interface
         self.channel = channel
         self.channel_name = str(channel)
         self.bitrate = bitrate
         self.listen_only = listen_only
-        self.retry_interval = retry_interval
+        self.backoff = Backoff(retry_interval, max_retry_interval)
         self.recv_timeout = recv_timeout
         self.kwargs = dict(kwargs)
         self.frames = 0
@@ -241,7 +324,7 @@ class CanTap(Tap):
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
         self._out: TapQueue | None = None
-        self._capturing = False
+        self._supervisor: Supervisor[_OpenBus] | None = None
 
     # -- passive state ---------------------------------------------------------------------
 
@@ -251,7 +334,7 @@ class CanTap(Tap):
             return {}, "unknown", "socketcan: listen-only state not read yet"
         return listen_only_plan(self.interface, self.kwargs, self.listen_only)
 
-    def _check_socketcan(self) -> None:
+    def check_socketcan(self) -> None:
         if self.interface == "socketcan":
             self.passive, self.passive_reason = socketcan_passive(self.channel_name)
             self._update_settings()
@@ -268,7 +351,7 @@ class CanTap(Tap):
             "passive_reason": self.passive_reason,
         }
 
-    def _passive_event(self, out: TapQueue) -> None:
+    def passive_event(self, out: TapQueue) -> None:
         level = INFO if self.passive == "yes" else WARNING
         word = {"yes": "passive", "no": "not passive"}.get(self.passive, "passive: unknown")
         self.event(out, level, "passive", f"{word}: {self.passive_reason}")
@@ -281,7 +364,11 @@ class CanTap(Tap):
 
     @property
     def is_open(self) -> bool:
-        return self._capturing
+        return self._supervisor is not None and self._supervisor.is_open
+
+    @property
+    def failed(self) -> str | None:
+        return None if self._supervisor is None else self._supervisor.failed
 
     def start(self, out: TapQueue) -> None:
         if self._out is not None:
@@ -289,11 +376,17 @@ class CanTap(Tap):
         self._out = out
         self._stop = threading.Event()
         self._wake = threading.Event()
-        self._check_socketcan()
-        self._passive_event(out)
+        self.check_socketcan()
+        self.passive_event(out)
+        channel = _Channel(self, out, self._wake)
+
+        def emit(level: int, kind: str, message: str, count: int) -> None:
+            self.event(out, level, kind, message, count)
+
+        self._supervisor = Supervisor(channel, emit, self.backoff)
         self._thread = threading.Thread(
-            target=self._run,
-            args=(out, self._stop, self._wake),
+            target=self._supervisor.run,
+            args=(self._stop,),
             name=f"eg2scope can {self.interface}:{self.channel_name}",
             daemon=True,
         )
@@ -307,21 +400,16 @@ class CanTap(Tap):
         self._wake.set()
         if self._thread is not None:
             self._thread.join(JOIN_TIMEOUT)
-        self.event(
-            out,
-            INFO,
-            "closed",
-            f"closed {self._label()} ({self.frames} frames)",
-        )
+        self.event(out, INFO, "closed", f"closed {self._label()} ({self.frames} frames)")
         self._out = None
-
-    # -- the supervisor thread -------------------------------------------------------------
 
     def _label(self) -> str:
         return f"{self.interface} channel {self.channel_name}"
 
-    def _open(self) -> can.BusABC:
+    def open_bus(self) -> can.BusABC:
+        """A python-can bus on the tap's interface and channel, listen-only where it can be."""
         kwargs = {**self.kwargs, **self._extra}
+        kwargs.pop("receive_own_messages", None)  # never: the tap only listens
         if self.bitrate is not None:
             kwargs["bitrate"] = self.bitrate
         bus = can.Bus(
@@ -334,74 +422,6 @@ class CanTap(Tap):
             _shutdown(bus)
             raise OSError(f"interface {self.channel_name} is down")
         return bus
-
-    def _run(self, out: TapQueue, stop: threading.Event, wake: threading.Event) -> None:
-        every = f"retrying every {self.retry_interval:g} s"
-        first_try = time.monotonic()
-        lost_at: float | None = None
-        reported = False
-        ever_open = False
-        while not stop.is_set():
-            listener = _FrameListener(self, out, wake)
-            try:
-                bus = self._open()
-                wake.clear()
-                try:
-                    notifier = can.Notifier(bus, [listener], timeout=self.recv_timeout)
-                except Exception:
-                    _shutdown(bus)
-                    raise
-            except Exception as exc:
-                if not reported and not ever_open:
-                    self.event(
-                        out,
-                        ERROR,
-                        "open",
-                        f"cannot open {self._label()}: {_describe(exc)}; {every}",
-                    )
-                reported = True
-                stop.wait(self.retry_interval)
-                continue
-            retried = reported or ever_open
-            reported = False
-            now = time.monotonic()
-            if not ever_open:
-                waited = now - first_try
-                after = f" after {waited:.2f} s of retries" if waited >= self.retry_interval else ""
-                bitrate = f" at {self.bitrate} bit/s" if self.bitrate else ""
-                self.event(out, INFO, "open", f"opened {self._label()}{bitrate}{after}")
-            else:
-                gap = now - (lost_at if lost_at is not None else now)
-                self.event(
-                    out,
-                    INFO,
-                    "reopened",
-                    f"reopened {self._label()} after a {gap:.2f} s gap "
-                    "(frames on the bus during the gap were not captured)",
-                )
-            if retried and self.interface == "socketcan":
-                # the link may have been (re)created meanwhile, with its default settings
-                before = self.passive
-                self._check_socketcan()
-                if self.passive != before:
-                    self._passive_event(out)
-            ever_open = True
-            self._capturing = True
-            while not stop.is_set() and listener.error is None:
-                wake.wait(0.5)
-            error = listener.error
-            self._capturing = False
-            listener.halted.set()
-            try:
-                notifier.stop(timeout=JOIN_TIMEOUT)
-            except Exception:
-                pass
-            _shutdown(bus)
-            self.frames += listener.frames
-            if error is None or stop.is_set():
-                break
-            lost_at = time.monotonic()
-            self.event(out, WARNING, "lost", f"lost {self._label()}: {_describe(error)}; {every}")
 
 
 def _shutdown(bus: can.BusABC) -> None:

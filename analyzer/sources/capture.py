@@ -1,28 +1,47 @@
-"""Capture files as a stream of pipeline Items, chosen by suffix (as python-can's LogReader).
+"""Capture files as a stream of pipeline Items, chosen by their full suffix (as python-can's
+LogReader chooses its readers).
 
-- CAN logs: candump -L ``.log`` and everything python-can's LogReader reads (``can_files``);
-- eg2scope recordings: ``.mcap`` (the raw topics are decoded again);
-- anything else: raw bytes of a serial line (regular serial protocol or Modbus RTU).
+- CAN logs: candump -L ``.log`` and everything python-can reads (``can_files``), also gzip
+  compressed where python-can can read them from a stream (``can.log.gz``, ``trace.asc.gz``);
+- eg2scope recordings: ``.mcap`` (``analyzer.recording``: the raw topics are decoded again, the
+  recorded source events come back in place);
+- anything else: raw bytes of a serial line (regular serial protocol or Modbus RTU); ``.gz``:
+  such bytes, compressed.
 
-Every reader is a context manager and an iterable of Items, with ``size``/``position`` (bytes)
-for progress bars and ``errors``: damage found in the file, reported instead of raised, after
-yielding everything before it.
+``CAPTURE_READERS`` maps a suffix to ``"module:Class"``; a reader's module is imported only
+when a file of its kind is opened. Every reader is a context manager and an iterable of Items
+(and, from a recording, of SourceEvents), with ``size``/``position`` (bytes) for progress bars
+and ``errors``: damage found in the file, reported instead of raised, after yielding
+everything before it (non-empty ``errors``: the input was damaged). A file that cannot be read
+at all raises ``OSError`` naming it, the same for every format.
 """
 
 from __future__ import annotations
 
+import gzip
+import importlib
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from decoders.model import Chunk
 
+from ..errors import UsageError
 from ..lifecycle import Closing
-from ..pipeline import Item
+from ..model import Item, SourceEvent
 from . import can_files
 
 READ_SIZE = 1 << 16
+
+_CAN_LOG = "analyzer.sources.capture:CanLogReader"
+#: suffix (lower case, compound ones whole: ".log.gz") -> "module:Class" of its reader
+CAPTURE_READERS: dict[str, str] = {
+    **{suffix: _CAN_LOG for suffix in sorted(can_files.CAN_SUFFIXES)},
+    ".mcap": "analyzer.recording:McapCaptureReader",
+    ".gz": "analyzer.sources.capture:GzipBytesReader",
+}
+RAW_BYTES = "analyzer.sources.capture:RawBytesReader"  # any other suffix
 
 
 class CaptureReader(Closing):
@@ -35,21 +54,29 @@ class CaptureReader(Closing):
 
     def __init__(self, path: str | os.PathLike[str], bus: str | None = None) -> None:
         self.path = Path(path)
-        if not self.path.exists():
-            raise FileNotFoundError(f"capture file not found: {self.path}")
-        if self.path.is_dir():
-            raise IsADirectoryError(f"capture path is a directory, not a file: {self.path}")
+        check_readable(self.path)
         self.bus = bus
         self.size = self.path.stat().st_size
         self.position = 0
         self.errors: list[str] = []
         self.metadata: dict[str, Any] = {}
 
-    def __iter__(self) -> Iterator[Item]:
+    def __iter__(self) -> Iterator[Item | SourceEvent]:
         raise NotImplementedError
 
     def close(self) -> None:
         pass
+
+
+def check_readable(path: Path) -> None:
+    """OSError naming ``path`` unless it is a file this process may read (checked without
+    opening it: a FIFO must not be opened twice)."""
+    if not path.exists():
+        raise FileNotFoundError(f"capture file not found: {path}")
+    if path.is_dir():
+        raise IsADirectoryError(f"capture path is a directory, not a file: {path}")
+    if not os.access(path, os.R_OK):
+        raise PermissionError(f"cannot read {path}: permission denied")
 
 
 class RawBytesReader(CaptureReader):
@@ -57,12 +84,50 @@ class RawBytesReader(CaptureReader):
 
     single_stream = True
 
-    def __iter__(self) -> Iterator[Item]:
+    def __init__(self, path: str | os.PathLike[str], bus: str | None = None) -> None:
+        super().__init__(path, bus)
+        self._file = self.path.open("rb")
+
+    def __iter__(self) -> Iterator[Item | SourceEvent]:
         bus = self.bus or "serial"
-        with self.path.open("rb") as f:
-            while data := f.read(READ_SIZE):
-                self.position += len(data)
+        read = self._file.read
+        while data := read(READ_SIZE):
+            self.position += len(data)
+            yield Item(bus, Chunk(data))
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class GzipBytesReader(CaptureReader):
+    """A gzip compressed raw dump of a serial line. A cut or damaged file yields every byte
+    before the damage and says so in ``errors``. ``position`` counts compressed bytes."""
+
+    single_stream = True
+
+    def __init__(self, path: str | os.PathLike[str], bus: str | None = None) -> None:
+        super().__init__(path, bus)
+        self._raw = self.path.open("rb")
+        self._file = gzip.GzipFile(fileobj=self._raw, mode="rb")
+
+    def __iter__(self) -> Iterator[Item | SourceEvent]:
+        bus = self.bus or "serial"
+        total = 0
+        try:
+            while data := self._file.read1(READ_SIZE):  # read1: nothing held back at a cut
+                total += len(data)
+                self.position = self._raw.tell()
                 yield Item(bus, Chunk(data))
+        except (OSError, EOFError) as exc:
+            self.errors.append(
+                f"{self.path.name}: compressed data damaged or cut short after {total} bytes "
+                f"({type(exc).__name__}: {exc}); the rest is lost"
+            )
+        self.position = self.size
+
+    def close(self) -> None:
+        self._file.close()
+        self._raw.close()
 
 
 def can_bus_name(channel: str | None) -> str:
@@ -84,7 +149,7 @@ class CanLogReader(CaptureReader):
         super().__init__(path, bus)
         self._reader = can_files.open_can_file(self.path)
 
-    def __iter__(self) -> Iterator[Item]:
+    def __iter__(self) -> Iterator[Item | SourceEvent]:
         reader = self._reader
         fixed = self.bus
         names: dict[str | None, str] = {}
@@ -116,21 +181,30 @@ def _tell(reader: Any, count: int, size: int) -> int:
     return size // 2  # unknown position: show an indeterminate half-way bar
 
 
-Opener = Callable[[Path, str | None], CaptureReader]
+def reader_for(path: str | os.PathLike[str]) -> str:
+    """The ``"module:Class"`` of the reader for ``path``, by its longest registered suffix
+    (``.log.gz`` before ``.gz``). UsageError for a compressed file of a kind that cannot be
+    read compressed (``.mcap.gz``, ``.mf4.gz``)."""
+    p = Path(path)
+    suffixes = [s.lower() for s in p.suffixes]
+    for i in range(len(suffixes)):
+        tail = "".join(suffixes[i:])
+        if tail in CAPTURE_READERS and tail != ".gz":
+            return CAPTURE_READERS[tail]
+        inner = "".join(suffixes[i:-1])
+        if suffixes[-1] == ".gz" and inner in CAPTURE_READERS:
+            raise UsageError(can_files.compressed_unreadable(p, inner))
+    if suffixes and suffixes[-1] == ".gz":
+        return CAPTURE_READERS[".gz"]
+    return RAW_BYTES
 
-# suffix -> reader; filled from can_files' registry, plus .mcap (recordings)
-CAPTURE_READERS: dict[str, Opener] = {suffix: CanLogReader for suffix in can_files.CAN_READERS}
 
-
-def register_reader(suffix: str, opener: Opener) -> None:
-    CAPTURE_READERS[suffix.lower()] = opener
+def _load(target: str) -> type[CaptureReader]:
+    module, _, name = target.partition(":")
+    reader: type[CaptureReader] = getattr(importlib.import_module(module), name)
+    return reader
 
 
 def open_capture(path: str | os.PathLike[str], bus: str | None = None) -> CaptureReader:
     """Open a capture by its suffix; anything unknown is read as raw serial bytes."""
-    p = Path(path)
-    opener = CAPTURE_READERS.get(p.suffix.lower(), RawBytesReader)
-    return opener(p, bus)
-
-
-from . import mcap_reader  # noqa: E402, F401  (registers .mcap; imported last: it imports this module)
+    return _load(reader_for(path))(Path(path), bus)

@@ -1,9 +1,10 @@
 """The contract between live taps (capture threads) and the decoding consumer.
 
 A Tap runs its own capture thread(s) and puts Items (raw chunks or CAN frames, stamped on
-arrival) and SourceEvents (port lost, reopened, passive or not, ...) into a TapQueue. The queue
-is bounded: a capture thread never blocks on a slow consumer; when the queue is full the item is
-dropped and counted, and the consumer reports the count (drops are never silent).
+arrival) and SourceEvents (port lost, reopened, passive or not, ...: see ``supervisor``) into a
+TapQueue. The queue is bounded: a capture thread never blocks on a slow consumer; when the queue
+is full the item is dropped and counted, and the consumer reports the count (drops are never
+silent). A tap's ``settings`` (plain JSON data) describe it in a recording's metadata.
 """
 
 from __future__ import annotations
@@ -14,30 +15,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..pipeline import Item
-
-# foxglove.Log levels
-DEBUG, INFO, WARNING, ERROR = 1, 2, 3, 4
-
-
-@dataclass(slots=True)
-class SourceEvent:
-    """Something that happened to a source rather than on the bus."""
-
-    t: float
-    bus: str
-    level: int
-    message: str
-    kind: str = "info"  # "open", "passive", "lost", "reopened", "drops", "closed", "info"
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "t": self.t,
-            "bus": self.bus,
-            "level": self.level,
-            "kind": self.kind,
-            "message": self.message,
-        }
+from ..model import Item, SourceEvent
 
 
 class TapQueue:
@@ -101,8 +79,13 @@ class Tap:
     def stop(self) -> None:
         raise NotImplementedError
 
-    def event(self, out: TapQueue, level: int, kind: str, message: str) -> None:
-        out.put(SourceEvent(time.time(), self.bus, level, message, kind))
+    @property
+    def failed(self) -> str | None:
+        """Why the tap gave up for good (a setting its device refuses), else None."""
+        return None
+
+    def event(self, out: TapQueue, level: int, kind: str, message: str, count: int = 1) -> None:
+        out.put(SourceEvent(time.time(), self.bus, level, message, kind, count))
 
 
 def wait_open(taps: list[Tap], timeout: float = 3.0) -> bool:

@@ -11,8 +11,11 @@ import math
 import time
 from collections.abc import Callable, Iterable, Iterator
 
-from ..pipeline import Item
+from ..errors import UsageError
+from ..model import Item, SourceEvent
 
+MIN_SPEED = 0.001  # slower than this, a one-second capture would take over 16 minutes
+MAX_SPEED = 1e6
 MIN_SLEEP_S = 0.002  # shorter waits are gathered into the next (sleep has ~ms granularity)
 
 
@@ -27,26 +30,28 @@ def parse_speed(text: str | float | None) -> float | None:
         s = text.strip().lower()
         if s in ("max", "inf", "fast", ""):
             return None
-        value = float(s.removesuffix("x"))
-    if math.isnan(value) or value < 0:
-        raise ValueError(f"replay speed must be a positive number or 'max', not {text!r}")
-    if value == 0 or math.isinf(value):
+        try:
+            value = float(s.removesuffix("x"))
+        except ValueError:
+            value = math.nan
+    if value == 0 or value == math.inf:
         return None
+    if not MIN_SPEED <= value <= MAX_SPEED:  # also NaN and negatives
+        raise UsageError(
+            f"replay speed must be 'max' or a factor from {MIN_SPEED:g} to {MAX_SPEED:g} "
+            f"(1 = real time), not {text!r}"
+        )
     return value
 
 
-def item_time(item: Item) -> float | None:
-    return item.payload.t
-
-
 def paced(
-    items: Iterable[Item],
+    items: Iterable[Item | SourceEvent],
     speed: float | None,
     *,
     max_gap_s: float | None = None,
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
-) -> Iterator[Item]:
+) -> Iterator[Item | SourceEvent]:
     """Yield ``items`` at their original timing divided by ``speed`` (None or inf: at once).
 
     ``max_gap_s``: wait at most this long (wall time) between two items, however long the
@@ -59,7 +64,7 @@ def paced(
     w0 = 0.0
     last: float | None = None
     for item in items:
-        t = item.payload.t
+        t = item.t if isinstance(item, SourceEvent) else item.payload.t
         if t is not None:
             if t0 is None or last is None:
                 t0, w0 = t, clock()

@@ -6,13 +6,22 @@
 - ``SerialBridge``: eg2scope sits in the line between host and device and relays every byte
   both ways unchanged; chunks carry their direction. Not passive.
 
-Each port has its own capture thread. It opens the port with ``serial_for_url`` (so
-``rfc2217://`` and ``loop://`` work), reads whatever is waiting with a short timeout, stamps each
-chunk with ``time.time()`` on arrival and puts ``Item(bus, Chunk(data, t), stream=port)`` into
-the TapQueue. The passive taps never write to their ports. A port that vanishes (adapter
-unplugged) is reported as ``lost`` and retried every ``retry_interval`` seconds until it comes
-back (``reopened``, with the length of the gap); a port that cannot be opened at start is
-reported as an ERROR and retried the same way. Nothing is raised or printed from the threads.
+Each port has its own capture thread running the shared supervisor loop (``supervisor``: open,
+lost, back-off, reopen, each reported as a SourceEvent). It opens the port with
+``serial_for_url`` (so ``rfc2217://`` and ``loop://`` work), reads whatever is waiting with a
+short timeout, stamps each chunk with ``time.time()`` on arrival and puts
+``Item(bus, Chunk(data, t), stream=port)`` into the TapQueue. The passive taps never write to
+their ports. Nothing is raised or printed from the threads.
+
+DTR and RTS: pyserial raises both when it opens a port, and many USB-RS485 adapters drive
+their transmitter from RTS, so a "passive" tap could enable its driver on the bus. Every tap
+here sets both lines (low by default) on the unopened port, so they are never raised, not even
+for a moment; ``rts``/``dtr`` choose otherwise for adapters that need it. The states are in
+``settings`` (and so in a recording's metadata).
+
+Settings a port can never take (a negative baud rate, an unknown URL scheme, a malformed
+``socket://`` URL, an empty port name) raise ``UsageError`` when the tap is made; only a port
+that may appear or come back is retried.
 """
 
 from __future__ import annotations
@@ -28,14 +37,16 @@ import serial
 
 from decoders.model import REQUEST, RESPONSE, Chunk
 
-from ..pipeline import Item
-from .live import ERROR, INFO, WARNING, Tap, TapQueue
+from ..errors import UsageError
+from ..model import INFO, WARNING, Item
+from .live import Tap, TapQueue
+from .supervisor import MAX_RETRY_INTERVAL, RETRY_INTERVAL, Backoff, Device, Supervisor
 
-RETRY_INTERVAL = 0.5  # seconds between attempts to (re)open a port
 READ_TIMEOUT = 0.05  # read timeout: bounds how long stop() waits for a capture thread
 WRITE_TIMEOUT = 0.5  # bridge relay writes
 PATH_CHECK_INTERVAL = 0.5  # while idle, how often to check that a port's device path still exists
 JOIN_TIMEOUT = 1.0
+URL_SCHEMES_PARSED_AT_OPEN = ("rfc2217", "socket", "loop")  # checked when the tap is made
 
 OnData = Callable[[bytes, float], None]
 
@@ -59,8 +70,34 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-class _PortReader:
-    """One port's capture thread: open (retrying), read, report loss, reopen."""
+def _level(high: bool) -> str:
+    return "high" if high else "low"
+
+
+def check_port(port: str, serial_kwargs: dict[str, Any]) -> None:
+    """UsageError if ``port`` with these settings can never be opened: an empty name, an
+    unknown URL scheme, a malformed URL, a setting pyserial refuses (a negative baud rate)."""
+    if not isinstance(port, str) or not port.strip() or "\0" in port:
+        raise UsageError(f"malformed serial port name {port!r}")
+    baudrate = serial_kwargs.get("baudrate")
+    if not isinstance(baudrate, int) or isinstance(baudrate, bool) or baudrate <= 0:
+        raise UsageError(
+            f"impossible baud rate {baudrate!r} for {port}: it must be a positive number"
+        )
+    try:
+        probe = serial.serial_for_url(port, do_not_open=True, **serial_kwargs)
+        scheme = port.partition("://")[0].lower() if "://" in port else ""
+        if scheme in URL_SCHEMES_PARSED_AT_OPEN:
+            probe.from_url(port)
+    except (ValueError, TypeError, serial.SerialException) as exc:  # TypeError: "socket://x"
+        raise UsageError(f"cannot use serial port {port}: {_describe(exc)}") from None
+
+
+class _PortReader(Device[serial.SerialBase]):
+    """One port: its capture thread runs the supervisor loop with this as the device."""
+
+    lost_in_gap = "bytes on the line"
+    fatal = (ValueError,)  # pyserial refusing a setting: retrying cannot help
 
     def __init__(
         self,
@@ -70,34 +107,41 @@ class _PortReader:
         on_data: OnData,
         serial_kwargs: dict[str, Any],
         *,
-        retry_interval: float,
+        backoff: Backoff,
         read_timeout: float,
-        rts: bool | None = None,
-        dtr: bool | None = None,
+        rts: bool,
+        dtr: bool,
     ) -> None:
         self.tap = tap
         self.out = out
         self.port = port
+        self.label = port
         self.on_data = on_data
         self.serial_kwargs = serial_kwargs
-        self.retry_interval = retry_interval
         self.read_timeout = read_timeout
         self.rts = rts
         self.dtr = dtr
         self.bytes = 0
         self.chunks = 0
-        self.is_open = False
+        self.supervisor = Supervisor(self, self._emit, backoff)
         self._ser: serial.SerialBase | None = None
         self._lock = threading.Lock()  # guards _ser between the reader and a bridge's writer
         self._thread: threading.Thread | None = None
         # a device path (not a URL): checked while idle, so a vanished adapter is noticed
         self._is_path = port.startswith("/")
 
+    @property
+    def is_open(self) -> bool:
+        return self.supervisor.is_open
+
     # -- called from other threads -----------------------------------------------------------
 
     def start(self, stop: threading.Event) -> None:
         self._thread = threading.Thread(
-            target=self._run, args=(stop,), name=f"eg2scope serial {self.port}", daemon=True
+            target=self.supervisor.run,
+            args=(stop,),
+            name=f"eg2scope serial {self.port}",
+            daemon=True,
         )
         self._thread.start()
 
@@ -117,87 +161,48 @@ class _PortReader:
                 return f"{self.port}: {_describe(exc)}"
         return None
 
-    # -- the capture thread ------------------------------------------------------------------
+    # -- the device, on the capture thread -------------------------------------------------------
 
-    def _event(self, level: int, kind: str, message: str) -> None:
-        self.tap.event(self.out, level, kind, message)
+    def _emit(self, level: int, kind: str, message: str, count: int) -> None:
+        self.tap.event(self.out, level, kind, message, count)
 
-    def _run(self, stop: threading.Event) -> None:
-        every = f"retrying every {self.retry_interval:g} s"
-        lost_at: float | None = None  # monotonic time the port was lost
-        first_try = time.monotonic()
-        reported = False  # the current open failure has been reported
-        ever_open = False
-        while not stop.is_set():
-            try:
-                ser = self._open()
-            except Exception as exc:
-                if not reported and not ever_open:
-                    self._event(
-                        ERROR, "open", f"cannot open {self.port}: {_describe(exc)}; {every}"
-                    )
-                reported = True
-                stop.wait(self.retry_interval)
-                continue
-            reported = False
-            now = time.monotonic()
-            if not ever_open:
-                waited = now - first_try
-                after = f" after {waited:.2f} s of retries" if waited >= self.retry_interval else ""
-                self._event(INFO, "open", f"opened {self.port}{self._line_settings(ser)}{after}")
-            else:
-                gap = now - (lost_at if lost_at is not None else now)
-                self._event(
-                    INFO,
-                    "reopened",
-                    f"reopened {self.port} after a {gap:.2f} s gap "
-                    "(bytes on the line during the gap were not captured)",
-                )
-            ever_open = True
-            self.is_open = True
-            error = self._capture(ser, stop)
-            self.is_open = False
-            self._close()
-            if error is None:
-                break
-            lost_at = time.monotonic()
-            self._event(WARNING, "lost", f"lost {self.port}: {error}; {every}")
+    def why(self, exc: BaseException) -> str:
+        return _describe(exc)
 
-    def _line_settings(self, ser: serial.SerialBase) -> str:
-        try:
-            return f" at {ser.baudrate} baud {ser.bytesize}{ser.parity}{ser.stopbits:g}"
-        except Exception:
-            return ""
-
-    def _open(self) -> serial.SerialBase:
+    def open(self) -> serial.SerialBase:
         ser = serial.serial_for_url(
             self.port, do_not_open=True, timeout=self.read_timeout, **self.serial_kwargs
         )
-        if self.rts is not None:
-            ser.rts = self.rts
-        if self.dtr is not None:
-            ser.dtr = self.dtr
+        # set before open(): pyserial applies them while opening, so they are never raised
+        ser.dtr = self.dtr
+        ser.rts = self.rts
         ser.open()
         with self._lock:
             self._ser = ser
         return ser
 
-    def _close(self) -> None:
-        with self._lock:
-            ser, self._ser = self._ser, None
-        if ser is not None:
-            try:
-                ser.close()
-            except Exception:
-                pass
+    def describe(self, ser: serial.SerialBase) -> str:
+        try:
+            line = f" at {ser.baudrate} baud {ser.bytesize}{ser.parity}{ser.stopbits:g}"
+        except Exception:
+            line = ""
+        return f"{line}, RTS {_level(self.rts)}, DTR {_level(self.dtr)}"
 
-    def _capture(self, ser: serial.SerialBase, stop: threading.Event) -> str | None:
+    def close(self, ser: serial.SerialBase) -> None:
+        with self._lock:
+            self._ser = None
+        try:
+            ser.close()
+        except Exception:
+            pass
+
+    def capture(self, ser: serial.SerialBase, running: Callable[[], bool]) -> str | None:
         """Read until stopped (None) or the port fails (why)."""
         on_data = self.on_data
         read = ser.read
         last_check = time.monotonic()
         try:
-            while not stop.is_set():
+            while running():
                 data = read(max(1, ser.in_waiting))
                 if data:
                     t = time.time()
@@ -216,20 +221,35 @@ class _PortReader:
 
 
 class _SerialTapBase(Tap):
-    """Threads, start and stop shared by the serial taps."""
+    """Settings, threads, start and stop shared by the serial taps."""
 
     def __init__(
         self,
         bus: str,
         passive: str,
         settings: dict[str, Any],
+        ports: Sequence[str],
+        baudrate: int,
+        serial_kwargs: dict[str, Any],
         *,
         retry_interval: float,
+        max_retry_interval: float,
         read_timeout: float,
+        rts: bool,
+        dtr: bool,
     ) -> None:
-        super().__init__(bus, passive, settings)
-        self.retry_interval = retry_interval
+        self.baudrate = baudrate
+        self.rts = rts
+        self.dtr = dtr
+        self.serial_kwargs = _serial_kwargs(baudrate, serial_kwargs)
+        for port in ports:
+            check_port(port, self.serial_kwargs)
+        self.backoff = Backoff(retry_interval, max_retry_interval)
         self.read_timeout = read_timeout
+        note = settings.pop("note")
+        settings.update({k: _plain(v) for k, v in self.serial_kwargs.items()})
+        settings.update(rts=_level(rts), dtr=_level(dtr), passive=passive, note=note)
+        super().__init__(bus, passive, settings)
         self._readers: list[_PortReader] = []
         self._stop = threading.Event()
         self._out: TapQueue | None = None
@@ -251,6 +271,11 @@ class _SerialTapBase(Tap):
     @property
     def is_open(self) -> bool:
         return bool(self._readers) and all(r.is_open for r in self._readers)
+
+    @property
+    def failed(self) -> str | None:
+        reasons = [f"{r.port}: {r.supervisor.failed}" for r in self._readers if r.supervisor.failed]
+        return "; ".join(reasons) or None
 
     def start(self, out: TapQueue) -> None:
         if self._out is not None:
@@ -279,18 +304,17 @@ class _SerialTapBase(Tap):
             )
         self._out = None
 
-    def _reader(
-        self, out: TapQueue, port: str, on_data: OnData, serial_kwargs: dict[str, Any], **kw: Any
-    ) -> _PortReader:
+    def _reader(self, out: TapQueue, port: str, on_data: OnData) -> _PortReader:
         return _PortReader(
             self,
             out,
             port,
             on_data,
-            serial_kwargs,
-            retry_interval=self.retry_interval,
+            self.serial_kwargs,
+            backoff=self.backoff,
             read_timeout=self.read_timeout,
-            **kw,
+            rts=self.rts,
+            dtr=self.dtr,
         )
 
 
@@ -315,8 +339,7 @@ class SerialTap(_SerialTapBase):
     """Passive tap on one serial port carrying both directions (RS485, or one RS232 wire).
 
     ``serial_kwargs`` go to pyserial (``bytesize``, ``parity``, ``stopbits``, ...). ``rts`` /
-    ``dtr``: set these modem lines before opening (None: pyserial's default); some RS485
-    adapters drive their transmitter from RTS.
+    ``dtr``: the modem lines' state from the moment the port opens (low: never raised).
     """
 
     def __init__(
@@ -326,30 +349,34 @@ class SerialTap(_SerialTapBase):
         baudrate: int = 115200,
         *,
         retry_interval: float = RETRY_INTERVAL,
+        max_retry_interval: float = MAX_RETRY_INTERVAL,
         read_timeout: float = READ_TIMEOUT,
-        rts: bool | None = None,
-        dtr: bool | None = None,
+        rts: bool = False,
+        dtr: bool = False,
         **serial_kwargs: Any,
     ) -> None:
         self.port = port
-        self.baudrate = baudrate
-        self.rts = rts
-        self.dtr = dtr
-        self.serial_kwargs = _serial_kwargs(baudrate, serial_kwargs)
         settings: dict[str, Any] = {
             "kind": "serial",
             "port": port,
-            **{k: _plain(v) for k, v in self.serial_kwargs.items()},
-            "passive": "yes",
             "note": "read-only tap: eg2scope never writes to the port",
         }
         super().__init__(
-            bus, "yes", settings, retry_interval=retry_interval, read_timeout=read_timeout
+            bus,
+            "yes",
+            settings,
+            [port],
+            baudrate,
+            serial_kwargs,
+            retry_interval=retry_interval,
+            max_retry_interval=max_retry_interval,
+            read_timeout=read_timeout,
+            rts=rts,
+            dtr=dtr,
         )
 
     def _make_readers(self, out: TapQueue) -> list[_PortReader]:
-        emit = _stream_emitter(out, self.bus, self.port, None)
-        return [self._reader(out, self.port, emit, self.serial_kwargs, rts=self.rts, dtr=self.dtr)]
+        return [self._reader(out, self.port, _stream_emitter(out, self.bus, self.port, None))]
 
     def _passive_message(self) -> tuple[int, str]:
         return INFO, f"passive: eg2scope only reads {self.port} and never writes to it"
@@ -369,16 +396,17 @@ class SerialPairTap(_SerialTapBase):
         *,
         directions: Sequence[str | None] | None = None,
         retry_interval: float = RETRY_INTERVAL,
+        max_retry_interval: float = MAX_RETRY_INTERVAL,
         read_timeout: float = READ_TIMEOUT,
-        rts: bool | None = None,
-        dtr: bool | None = None,
+        rts: bool = False,
+        dtr: bool = False,
         **serial_kwargs: Any,
     ) -> None:
         self.ports = list(ports)
         if not self.ports:
-            raise ValueError("SerialPairTap needs at least one port")
+            raise UsageError("SerialPairTap needs at least one port")
         if len(set(self.ports)) != len(self.ports):
-            raise ValueError(f"SerialPairTap ports must be distinct: {self.ports}")
+            raise UsageError(f"the ports of a serial pair must be distinct: {self.ports}")
         dirs = list(directions) if directions is not None else [None] * len(self.ports)
         if len(dirs) != len(self.ports):
             raise ValueError("directions must give one entry per port")
@@ -386,32 +414,29 @@ class SerialPairTap(_SerialTapBase):
             if d not in (None, REQUEST, RESPONSE):
                 raise ValueError(f"direction must be {REQUEST!r}, {RESPONSE!r} or None: {d!r}")
         self.directions = dirs
-        self.baudrate = baudrate
-        self.rts = rts
-        self.dtr = dtr
-        self.serial_kwargs = _serial_kwargs(baudrate, serial_kwargs)
         settings: dict[str, Any] = {
             "kind": "serial-pair",
             "ports": list(self.ports),
             "directions": list(dirs),
-            **{k: _plain(v) for k, v in self.serial_kwargs.items()},
-            "passive": "yes",
             "note": "read-only tap, one adapter per wire: eg2scope never writes to the ports",
         }
         super().__init__(
-            bus, "yes", settings, retry_interval=retry_interval, read_timeout=read_timeout
+            bus,
+            "yes",
+            settings,
+            self.ports,
+            baudrate,
+            serial_kwargs,
+            retry_interval=retry_interval,
+            max_retry_interval=max_retry_interval,
+            read_timeout=read_timeout,
+            rts=rts,
+            dtr=dtr,
         )
 
     def _make_readers(self, out: TapQueue) -> list[_PortReader]:
         return [
-            self._reader(
-                out,
-                port,
-                _stream_emitter(out, self.bus, port, direction),
-                self.serial_kwargs,
-                rts=self.rts,
-                dtr=self.dtr,
-            )
+            self._reader(out, port, _stream_emitter(out, self.bus, port, direction))
             for port, direction in zip(self.ports, self.directions, strict=True)
         ]
 
@@ -427,7 +452,7 @@ class SerialBridge(_SerialTapBase):
     the host as ``Chunk(direction="request")`` on stream "host", bytes from the device as
     ``"response"`` on stream "device". Not passive: the link depends on eg2scope running.
     Bytes that cannot be relayed (the other port is down or stuck) are still emitted, counted,
-    and reported as WARNING events.
+    and reported as WARNING events. DTR and RTS stay low on both ports unless asked otherwise.
     """
 
     def __init__(
@@ -438,36 +463,43 @@ class SerialBridge(_SerialTapBase):
         baudrate: int = 115200,
         *,
         retry_interval: float = RETRY_INTERVAL,
+        max_retry_interval: float = MAX_RETRY_INTERVAL,
         read_timeout: float = READ_TIMEOUT,
         write_timeout: float = WRITE_TIMEOUT,
+        rts: bool = False,
+        dtr: bool = False,
         **serial_kwargs: Any,
     ) -> None:
         if host_port == device_port:
-            raise ValueError("host_port and device_port must differ")
+            raise UsageError("the bridge's host port and device port must differ")
         self.host_port = host_port
         self.device_port = device_port
-        self.baudrate = baudrate
-        self.serial_kwargs = _serial_kwargs(
-            baudrate, {"write_timeout": write_timeout, **serial_kwargs}
-        )
         self.unrelayed = {"host": 0, "device": 0}  # bytes from that side not relayed (total)
         settings: dict[str, Any] = {
             "kind": "serial-bridge",
             "host_port": host_port,
             "device_port": device_port,
-            **{k: _plain(v) for k, v in self.serial_kwargs.items()},
-            "passive": "no",
             "inline": True,
             "note": "inline bridge: eg2scope relays every byte between host and device; "
             "not passive, the link depends on eg2scope running",
         }
         super().__init__(
-            bus, "no", settings, retry_interval=retry_interval, read_timeout=read_timeout
+            bus,
+            "no",
+            settings,
+            [host_port, device_port],
+            baudrate,
+            {"write_timeout": write_timeout, **serial_kwargs},
+            retry_interval=retry_interval,
+            max_retry_interval=max_retry_interval,
+            read_timeout=read_timeout,
+            rts=rts,
+            dtr=dtr,
         )
 
     def _make_readers(self, out: TapQueue) -> list[_PortReader]:
-        host = self._reader(out, self.host_port, _noop, self.serial_kwargs)
-        device = self._reader(out, self.device_port, _noop, self.serial_kwargs)
+        host = self._reader(out, self.host_port, _noop)
+        device = self._reader(out, self.device_port, _noop)
         host.on_data = self._relay(out, "host", REQUEST, device)
         device.on_data = self._relay(out, "device", RESPONSE, host)
         return [host, device]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import random
 import shutil
 from pathlib import Path
 from typing import Any
@@ -16,9 +17,9 @@ from analyzer.sources.can_files import (
     CandumpReader,
     PythonCanFileReader,
     is_can_file,
-    message_to_frame,
     open_can_file,
 )
+from analyzer.sources.can_message import message_to_frame
 from decoders.model import CanFrame
 
 T0 = 1600000000.0
@@ -267,6 +268,8 @@ BAD_LINES = [
     "(1.0) can0 123#1122334455667788_3",
     "(1.0) can0",
     "(1.0) can0 123#01 R extra",
+    "(1.0) can0 4FF00001#00",  # 31 bits: must not be masked to the EG2 frame 0FF00001
+    "(1.0) can0 C4FF0001#00",  # bit 30 (no flag of candump's) with the EFF flag
 ]
 
 
@@ -302,6 +305,7 @@ def test_candump_with_malformed_lines(tmp_path: Path) -> None:
     assert all(": cannot parse: " in e for e in reader.errors)
     assert reader.errors[0].startswith("line 5: ")  # after the blank and comment lines
     assert reader.errors[-1].startswith(f"line {len(lines) + 2}: ")  # the cut last line
+    assert "truncated" in reader.errors[-1]
 
 
 def test_candump_errors_are_capped(tmp_path: Path) -> None:
@@ -410,8 +414,9 @@ def test_csv_with_a_bad_row(tmp_path: Path) -> None:
     lines.insert(11, "this,is,not,a,frame")
     path.write_text("\n".join(lines) + "\n")
     frames, reader = read_all(path)
-    assert len(frames) == 10
-    assert reader.errors and "damaged after 10 frames" in reader.errors[0]
+    assert [f.data for f in frames] == [bytes(m.data) for m in _many(20)]  # read on after it
+    assert len(reader.errors) == 1
+    assert reader.errors[0].startswith("line 12: cannot parse: 'this,is,not,a,frame' (")
 
 
 @pytest.mark.parametrize(
@@ -508,3 +513,158 @@ def test_message_to_frame_marks_long_frames_fd() -> None:
     assert fr.is_fd and fr.dlc == 12
     fr = message_to_frame(can.Message(arbitration_id=1, data=b"\x01", channel=3, timestamp=2.0))
     assert fr == CanFrame(2.0, 1, b"\x01", True, False, False, False, 1, "3")
+
+
+# -- damaged text captures: nothing skipped in silence, nothing changed -----------------------
+
+TEXT_FORMATS = [".log", ".asc", ".trc", ".csv"]
+# data bytes that show a cut: "40 0D 01" cut after "40 0" must not become 40 00
+EG2_MESSAGES = [
+    _msg(
+        i * 0.01, arbitration_id=0x04FF0001 + i % 2, data=bytes([0x40, 0x0D, 0x01, i][: 1 + i % 4])
+    )
+    for i in range(8)
+]
+
+
+def _is_frame_line(fmt: str, line: bytes) -> bool:
+    text = line.decode().strip()
+    if fmt == ".asc":
+        return " Rx " in f" {text} "
+    if fmt == ".trc":
+        return bool(text) and not text.startswith(";")
+    if fmt == ".csv":
+        return bool(text) and not text.startswith("timestamp")
+    return bool(text)
+
+
+@pytest.mark.parametrize("fmt", TEXT_FORMATS)
+def test_a_cut_never_changes_a_frame(tmp_path: Path, fmt: str) -> None:
+    """Cut at every byte of the last frames: the frames read are the whole file's first ones,
+    unchanged; a frame line cut short is reported as truncated, never read."""
+    whole = tmp_path / f"whole{fmt}"
+    write_capture(whole, EG2_MESSAGES)
+    data = whole.read_bytes()
+    want, reader = read_all(whole)
+    assert reader.errors == [] and len(want) == len(EG2_MESSAGES)
+    lines = data.splitlines(keepends=True)
+    starts = [sum(len(x) for x in lines[:i]) for i in range(len(lines))]
+    frame_lines = [i for i, line in enumerate(lines) if _is_frame_line(fmt, line)]
+    # a line is whole once its first line-end byte is there (a CR alone ends a line)
+    ends = [
+        start + len(line.rstrip(b"\r\n")) + 1 for start, line in zip(starts, lines, strict=True)
+    ]
+    cut_path = tmp_path / f"cut{fmt}"
+    for cut in range(starts[frame_lines[-3]], len(data)):
+        cut_path.write_bytes(data[:cut])
+        got, reader = read_all(cut_path)
+        assert got == want[: len(got)], cut
+        assert len(got) == sum(1 for i in frame_lines if ends[i] <= cut), cut
+        n = max(i for i, start in enumerate(starts) if start <= cut)  # the line cut in
+        partial = data[starts[n] : cut]
+        if n in frame_lines and partial.strip() and cut < ends[n]:
+            assert any(e.startswith(f"line {n + 1}: ") and "truncated" in e for e in reader.errors)
+
+
+JUNK = {
+    # (line to insert after frame k, kind of report)
+    ".log": [("junk junk", "cannot parse"), ("(1.0) can0 4FF00001#00", "29 bits")],
+    ".asc": [
+        ("this is junk", "not a frame"),
+        (" 1.000000 1  4FF0001x        Rx   d 3 4G 0D 01", "cannot parse"),
+        (" 1.000000 1  4FF$001x        Rx   d 3 40 0D 01", "not a frame"),
+        (" 1.000000 1  4FF0001x        Rx   d 3 40", "DLC 3 but 1 data bytes"),
+    ],
+    ".trc": [
+        ("junk junk", "not a frame"),
+        ("      9      9.000 DT  1  4FF0001 Rx -  3    4G 0D 01", "cannot parse"),
+        ("      9      9.000 DT  1  4FF0001 Rx -  3    40", "DLC 3 but 1 data bytes"),
+    ],
+    ".csv": [("this,is,not,a,frame", "cannot parse"), ("1.0,0x1,1,0,0,3,QA==", "DLC 3 but 1")],
+}
+
+
+@pytest.mark.parametrize("fmt", TEXT_FORMATS)
+def test_every_bad_line_is_reported_where_it_is(
+    tmp_path: Path, fmt: str, capfd: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / f"junk{fmt}"
+    write_capture(path, EG2_MESSAGES)
+    want, _ = read_all(path)
+    lines = path.read_text().splitlines()
+    frame_lines = [i for i, line in enumerate(lines) if _is_frame_line(fmt, line.encode())]
+    expected = []
+    for k, (junk, kind) in reversed(list(enumerate(JUNK[fmt]))):
+        at = frame_lines[2 * k + 1] + 1  # after every other frame, from the end
+        lines.insert(at, junk)
+        expected.append((at, kind))
+    numbers = {}  # final line number of each inserted line
+    for at, kind in expected:
+        shift = sum(1 for a, _ in expected if a < at)
+        numbers[at + shift + 1] = kind
+    path.write_text("\n".join(lines) + "\n")
+    got, reader = read_all(path)
+    assert got == want  # every good frame, before and after the bad lines
+    assert len(reader.errors) == len(numbers), reader.errors
+    for error, (number, kind) in zip(reader.errors, sorted(numbers.items()), strict=True):
+        assert error.startswith(f"line {number}: "), error
+        assert kind in error, error
+    out, err = capfd.readouterr()
+    assert out == err == ""  # python-can's own log lines stay out of the terminal
+    assert not [r for r in caplog.records if r.name.startswith("can")]
+
+
+@pytest.mark.parametrize("fmt", [".log", ".asc", ".trc", ".csv"])
+def test_random_bytes_are_reported(
+    tmp_path: Path, fmt: str, capfd: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / f"random{fmt}"
+    path.write_bytes(random.Random(7).randbytes(20000))
+    frames, reader = read_all(path)
+    assert frames == []
+    assert reader.errors and all(e.startswith("line ") for e in reader.errors[:-1])
+    assert capfd.readouterr() == ("", "")
+
+
+@pytest.mark.parametrize("fmt", TEXT_FORMATS)
+@pytest.mark.parametrize("ending", ["bom", "cr", "crlf"])
+def test_byte_order_mark_and_line_ends(tmp_path: Path, fmt: str, ending: str) -> None:
+    path = tmp_path / f"capture{fmt}"
+    write_capture(path, EG2_MESSAGES)
+    want, _ = read_all(path)
+    data = path.read_bytes().replace(b"\r\n", b"\n")  # python-can writes .trc with CRLF
+    if ending == "bom":
+        data = b"\xef\xbb\xbf" + data
+    else:
+        data = data.replace(b"\n", b"\r" if ending == "cr" else b"\r\n")
+    path.write_bytes(data)
+    got, reader = read_all(path)
+    assert reader.errors == []
+    assert got == want
+
+
+def test_cr_only_candump_log_large(tmp_path: Path) -> None:
+    """Line ends found beyond the first block too."""
+    path = tmp_path / "cr.log"
+    path.write_bytes(b"".join(b"(%d.0) can0 01180001#%02X\r" % (i, i % 256) for i in range(20000)))
+    frames, reader = read_all(path)
+    assert reader.errors == [] and len(frames) == 20000
+    assert [f.data[0] for f in frames] == [i % 256 for i in range(20000)]
+
+
+@pytest.mark.parametrize(
+    "content,words",
+    [
+        (b"", "the file is empty: not a BLF capture"),
+        (b"LOGG" + bytes(20), "too short for a BLF file header"),
+        (bytes(range(256)) * 4, "not a BLF capture (it does not start with the BLF signature"),
+    ],
+    ids=["empty", "short", "random"],
+)
+def test_blf_that_is_not_one_says_so_in_words(tmp_path: Path, content: bytes, words: str) -> None:
+    path = tmp_path / "x.blf"
+    path.write_bytes(content)
+    frames, reader = read_all(path)
+    assert frames == []
+    assert len(reader.errors) == 1 and words in reader.errors[0]
+    assert "struct" not in reader.errors[0]

@@ -20,17 +20,15 @@ import can.player
 import pytest
 from pymodbus.client import ModbusSerialClient
 
-from analyzer.live import LiveSession
-from analyzer.outputs import McapOutput
 from analyzer.pipeline import Decoding
+from analyzer.recording import McapRecorder, read_records
+from analyzer.session import Session, live_session
 from analyzer.sim.endpoints import ModbusGripperServer
 from analyzer.sim.gripper import GripperModel
 from analyzer.sim.ptybus import PtyBus
-from analyzer.sinks.mcap import McapRecorder
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.capture import open_capture
 from analyzer.sources.live import wait_open
-from analyzer.sources.mcap_reader import read_records
 from analyzer.sources.serial_tap import SerialTap
 from decoders.model import Record
 
@@ -38,13 +36,13 @@ ROOT = Path(__file__).resolve().parents[2]
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
-def start(session: LiveSession) -> threading.Thread:
+def start(session: Session) -> threading.Thread:
     thread = threading.Thread(target=session.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 5
-    while not session.taps[0].running and time.monotonic() < deadline:
+    while not session.source.taps[0].running and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert wait_open(session.taps, 5.0), "tap did not open"
+    assert wait_open(session.source.taps, 5.0), "tap did not open"
     return thread
 
 
@@ -53,8 +51,8 @@ def test_pymodbus_client_traffic_is_decoded_paired_and_named(tmp_path: Path) -> 
         model = GripperModel(1, now=time.monotonic(), object_width=300.0)
         server = ModbusGripperServer(line.path("gripper"), {1: model})
         recorder = McapRecorder(tmp_path / "modbus.mcap", metadata={})
-        session = LiveSession(
-            [SerialTap("rs485", line.path("tap"))], [McapOutput(recorder)], protocol="modbus-rtu"
+        session = live_session(
+            [SerialTap("rs485", line.path("tap"))], [recorder], protocol="modbus-rtu"
         )
         with server:
             thread = start(session)
@@ -122,7 +120,7 @@ def test_python_can_player_replay_is_recorded_like_the_log(tmp_path: Path, monke
     log = ROOT / "captures" / "can_pick_place.log"
     channel = f"eg2-player-{os.getpid()}-{time.monotonic_ns()}"
     recorder = McapRecorder(tmp_path / "player.mcap", metadata={})
-    session = LiveSession([CanTap("can0", "virtual", channel)], [McapOutput(recorder)])
+    session = live_session([CanTap("can0", "virtual", channel)], [recorder])
     thread = start(session)
     monkeypatch.setattr(
         sys, "argv", ["can.player", "-i", "virtual", "-c", channel, "--error-frames", str(log)]

@@ -13,14 +13,14 @@ from pathlib import Path
 
 import can
 
-from analyzer.live import LiveSession
-from analyzer.outputs import McapOutput, TextOutput
-from analyzer.pipeline import Decoding, Item
-from analyzer.sinks.mcap import McapRecorder
+from analyzer.model import Item
+from analyzer.pipeline import Decoding
+from analyzer.recording import McapRecorder, read_events, read_records
+from analyzer.session import Session, live_session
+from analyzer.sinks.text import TextListener
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.capture import open_capture
 from analyzer.sources.live import TapQueue
-from analyzer.sources.mcap_reader import read_events, read_records
 from analyzer.sources.serial_tap import SerialTap
 from decoders import build as b
 from decoders.model import Chunk, Record
@@ -35,7 +35,7 @@ def decode_all(items: list[Item]) -> list[Record]:
     return list(dec.feed_many(items))
 
 
-def run_in_thread(session: LiveSession) -> threading.Thread:
+def run_in_thread(session: Session) -> threading.Thread:
     thread = threading.Thread(target=session.run, daemon=True)
     thread.start()
     time.sleep(0.3)  # taps open their ports
@@ -64,9 +64,7 @@ def test_serial_tap_decodes_live_and_records(tmp_path: Path) -> None:
     out = io.StringIO()
     mcap_path = tmp_path / "run.mcap"
     recorder = McapRecorder(mcap_path, metadata={"test": True})
-    session = LiveSession(
-        [SerialTap("rs232", port)], [TextOutput(out, colour=False), McapOutput(recorder)]
-    )
+    session = live_session([SerialTap("rs232", port)], [TextListener(out, colour=False), recorder])
     thread = run_in_thread(session)
     data = serial_traffic()
     for i in range(0, len(data), 5):  # in bursts, as a USB adapter delivers them
@@ -97,7 +95,7 @@ def test_can_tap_on_virtual_bus_records_and_replays(tmp_path: Path) -> None:
     channel = f"eg2-live-{os.getpid()}-{time.monotonic_ns()}"
     mcap_path = tmp_path / "can.mcap"
     recorder = McapRecorder(mcap_path, metadata={})
-    session = LiveSession([CanTap("can0", "virtual", channel)], [McapOutput(recorder)])
+    session = live_session([CanTap("can0", "virtual", channel)], [recorder])
     thread = run_in_thread(session)
     frames = [
         b.can_write_request(1, 1020, b.u16le(0, 500, 500)),
@@ -143,7 +141,12 @@ def test_drops_are_counted_and_reported() -> None:
             pass
 
     out = io.StringIO()
-    session = LiveSession([Flood()], [TextOutput(out, colour=False)], queue_size=10)  # type: ignore[list-item]
-    counts = session.run(duration=0.3)
+    session = live_session(
+        [Flood()],  # type: ignore[list-item]
+        [TextListener(out, colour=False)],
+        queue_size=10,
+        duration=0.3,
+    )
+    counts = session.run()
     assert counts.dropped == 490
     assert "dropped 490 items" in out.getvalue()

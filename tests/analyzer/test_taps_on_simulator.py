@@ -11,8 +11,8 @@ from __future__ import annotations
 import threading
 import time
 
-from analyzer.live import LiveSession
-from analyzer.outputs import OutputBase
+from analyzer.listener import Listener
+from analyzer.session import Session, live_session
 from analyzer.sim.endpoints import CanGripperServer, SerialGripperServer
 from analyzer.sim.gripper import GripperModel
 from analyzer.sim.host import HostQuirks, run_host_cycle
@@ -23,28 +23,30 @@ from analyzer.sources.serial_tap import SerialBridge
 from decoders.model import REQUEST, RESPONSE, Record
 
 
-class Collect(OutputBase):
+class Collect(Listener):
+    wants_raw = True
+
     def __init__(self) -> None:
         self.got: list[Record] = []
         self.raw: dict[str, bytearray] = {"request": bytearray(), "response": bytearray()}
 
-    def records(self, records: list[Record]) -> None:
+    def on_records(self, records: list[Record]) -> None:
         self.got += records
 
-    def items(self, items: list) -> None:
+    def on_raw(self, items: list) -> None:
         for item in items:
             direction = getattr(item.payload, "direction", None)  # chunks of the bridge only
             if direction is not None:
                 self.raw[direction] += item.payload.data
 
 
-def run_session(session: LiveSession) -> threading.Thread:
+def run_session(session: Session) -> threading.Thread:
     thread = threading.Thread(target=session.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 5
-    while not all(t.running for t in session.taps) and time.monotonic() < deadline:
+    while not all(t.running for t in session.source.taps) and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert wait_open(session.taps, 5.0)
+    assert wait_open(session.source.taps, 5.0)
     return thread
 
 
@@ -67,7 +69,7 @@ def test_bridge_between_host_and_simulated_gripper() -> None:
         model = GripperModel(1, now=time.monotonic(), object_width=500.0)
         out = Collect()
         bridge = SerialBridge("rs232", host_line.path("bridge"), device_line.path("bridge"))
-        session = LiveSession([bridge], [out], protocol="eg2-serial")
+        session = live_session([bridge], [out], protocol="eg2-serial")
         with SerialGripperServer(device_line.path("gripper"), {1: model}):
             thread = run_session(session)
             result = run_host_cycle("serial", host_line.path("host"), [1], 1,
@@ -96,7 +98,7 @@ def test_can_tap_on_the_simulated_bus() -> None:
     models = {1: GripperModel(1, now=time.monotonic(), object_width=600.0),
               2: GripperModel(2, now=time.monotonic(), object_width=300.0)}  # fmt: skip
     out = Collect()
-    session = LiveSession([CanTap("can0", "virtual", channel)], [out])
+    session = live_session([CanTap("can0", "virtual", channel)], [out])
     with CanGripperServer(models, channel=channel):
         thread = run_session(session)
         result = run_host_cycle("can", channel, [1, 2], 1, quirks=HostQuirks(padded_reads=True),

@@ -4,7 +4,7 @@
                                             [--serial-baud 115200] [--only can|serial]
 
 CAN: python-can's virtual bus does not cross processes, so the flooder (a thread sending
-realistic EG2 polling traffic at a fixed rate) and the recorder (a LiveSession with the real
+realistic EG2 polling traffic at a fixed rate) and the recorder (a live Session with the real
 CanTap and MCAP output, as ``eg2scope record -i virtual`` runs it) share this process; the
 recorder's CPU is the process's minus the flooder thread's own.
 Serial: ``eg2scope record --serial PTY`` runs as a child process while this process writes
@@ -36,9 +36,8 @@ sys.path.insert(0, str(HERE))
 import can  # noqa: E402
 from traffic import can_frames, modbus_frames  # noqa: E402
 
-from analyzer.live import LiveSession  # noqa: E402
-from analyzer.outputs import McapOutput  # noqa: E402
-from analyzer.sinks.mcap import McapRecorder  # noqa: E402
+from analyzer.recording import McapRecorder  # noqa: E402
+from analyzer.session import live_session  # noqa: E402
 from analyzer.sources.can_tap import CanTap  # noqa: E402
 from analyzer.sources.live import wait_open  # noqa: E402
 
@@ -65,16 +64,17 @@ def flood_can(channel: str, rate: int, duration: float, result: dict) -> None:
 def bench_can(rate: int, duration: float, out: Path) -> dict:
     channel = f"bench-{os.getpid()}-{time.monotonic_ns()}"
     recorder = McapRecorder(out / f"can_{rate}.mcap", metadata={"bench": "can"})
-    session = LiveSession([CanTap("can0", "virtual", channel)], [McapOutput(recorder)])
+    session = live_session([CanTap("can0", "virtual", channel)], [recorder])
     flood: dict = {}
     thread = threading.Thread(target=flood_can, args=(channel, rate, duration, flood))
 
     def start_flood() -> None:
-        wait_open(session.taps)
+        wait_open(session.source.taps)
         thread.start()
 
+    session.source.on_started = start_flood
     cpu0, wall0 = time.process_time(), time.perf_counter()
-    runner = threading.Thread(target=session.run, kwargs={"on_start": start_flood})
+    runner = threading.Thread(target=session.run)
     runner.start()
     time.sleep(0.2)
     thread.join()

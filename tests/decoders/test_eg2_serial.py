@@ -13,7 +13,9 @@ from hypothesis import strategies as st
 from protocol_vectors import VECTORS_PATH, params
 
 from decoders import eg2_serial
-from decoders.eg2_serial import COMMANDS, Eg2SerialDecoder, build_frame
+from decoders import flags as F
+from decoders.build import serial_frame
+from decoders.eg2_serial import COMMANDS, Cmd, Eg2SerialDecoder
 from decoders.framing import NEED_MORE
 from decoders.model import FRAME, GARBAGE, REQUEST, RESPONSE, TRUNCATED, Chunk, Record
 
@@ -57,11 +59,20 @@ def random_sizes(rng: random.Random, total: int) -> list[int]:
 
 
 def signature(records: list[Record]) -> list[tuple[Any, ...]]:
-    return [(r.offset, r.length, r.kind, r.raw, tuple(r.errors)) for r in records]
+    return [(r.offset, r.length, r.kind, r.raw, tuple(r.errors), tuple(r.flags)) for r in records]
+
+
+def assert_flags(records: list[Record]) -> None:
+    """Every error and warning has its code, each code at most once; no code without words."""
+    for r in records:
+        assert len(set(r.flags)) == len(r.flags), r.flags
+        assert set(r.flags) <= F.ALL
+        assert bool(r.flags) == bool(r.errors or r.warnings), (r.flags, r.errors, r.warnings)
+        assert len(r.flags) <= len(r.errors) + len(r.warnings)
 
 
 def assert_accounting(records: list[Record], data: bytes) -> None:
-    """Every input byte in exactly one record, in order."""
+    """Every input byte in exactly one record, in order, each with its flags."""
     pos = 0
     for r in records:
         assert r.offset == pos, (r.kind, r.offset, pos)
@@ -69,6 +80,7 @@ def assert_accounting(records: list[Record], data: bytes) -> None:
         assert data[pos : pos + r.length] == r.raw
         pos += r.length
     assert pos == len(data)
+    assert_flags(records)
 
 
 # payload sizes of the documented layouts, so generated frames are mostly well formed
@@ -90,7 +102,7 @@ def random_frames(rng: random.Random, n: int) -> list[bytes]:
         if code in (0x00, 0x99, 0xFF, 0x51, 0xDC):
             size = rng.randint(0, 13)
         device = rng.choice((1, 1, 2, 3, 254, 255, rng.randint(0, 255)))
-        frames.append(build_frame(direction, device, code, rng.randbytes(size)))
+        frames.append(serial_frame(device, code, rng.randbytes(size), direction == RESPONSE))
     return frames
 
 
@@ -161,7 +173,7 @@ def test_bad_vectors_are_flagged(vector: dict[str, Any]) -> None:
 
 
 def frame(direction: str, device: int, code: int, data: str = "") -> bytes:
-    return build_frame(direction, device, code, h(data))
+    return serial_frame(device, code, h(data), direction == RESPONSE)
 
 
 Q, A = REQUEST, RESPONSE
@@ -547,6 +559,46 @@ def test_decode_table(
     assert json.loads(json.dumps(r.to_dict()))["fields"] == r.fields
 
 
+# (bytes, the record's flags): every error and warning text carries its code (issue 6)
+FLAGS: list[tuple[str, bytes, list[str]]] = [
+    ("valid", h("EB 90 01 05 10 F4 01 64 00 6F"), []),
+    ("bad checksum", h("EE 16 01 03 D9 E8 03 74"), [F.BAD_CHECKSUM]),
+    ("bad checksum, speed", h("EB 90 01 05 10 88 13 64 00 00"), [F.BAD_CHECKSUM, F.OUT_OF_RANGE]),
+    ("short payload", frame(Q, 1, 0x10, "F4 01"), [F.MALFORMED]),
+    ("status without data", frame(A, 1, 0x16), [F.MALFORMED]),
+    ("run state of 6 bytes", frame(A, 1, 0x41, "01 00 23 E8 03 64"), [F.MALFORMED]),
+    ("write failed", h("EE 16 01 02 12 55 6A"), [F.WRITE_FAILED]),
+    ("unknown status", frame(A, 1, 0x10, "07"), [F.UNDOCUMENTED]),
+    ("speed", frame(Q, 1, 0x11, "88 13"), [F.OUT_OF_RANGE]),
+    ("speed and force: one code", frame(Q, 1, 0x10, "88 13 10 27"), [F.OUT_OF_RANGE]),
+    ("limits", frame(Q, 1, 0x12, "D0 07 00 00"), [F.OUT_OF_RANGE]),
+    ("seek position 0", frame(Q, 1, 0x54, "00 00"), [F.OUT_OF_RANGE]),
+    ("run state fault", frame(A, 1, 0x41, "03 05 23 E8 03 64 00"), [F.DEVICE_FAULT]),
+    (
+        "run state: state, fault, position, force",
+        frame(A, 1, 0x41, "09 01 23 D0 07 0A 00"),
+        [F.OUT_OF_RANGE, F.DEVICE_FAULT],
+    ),
+    ("new ID 0", frame(Q, 1, 0x04, "00"), [F.OUT_OF_RANGE]),
+    ("set ID to broadcast", frame(Q, 255, 0x04, "05"), [F.BROADCAST]),
+    ("broadcast catch", frame(Q, 255, 0x10, "F4 01 64 00"), []),
+    ("response from broadcast", frame(A, 255, 0x16, "01"), [F.BROADCAST]),
+    ("ID 0", frame(Q, 0, 0x16), [F.INVALID_ID]),
+    ("ID 0, bad checksum", h("EB 90 00 01 16 00"), [F.BAD_CHECKSUM, F.INVALID_ID]),
+    ("unknown command", frame(Q, 3, 0xA5, "10 20 30"), [F.UNDOCUMENTED]),
+    ("hand code write failed", frame(A, 1, 0x51, "55"), [F.WRITE_FAILED]),
+    ("0x14 reply of 4 bytes", frame(A, 1, 0x14, "01 02 03 04"), []),
+]
+
+
+@pytest.mark.parametrize(("raw", "flags"), [pytest.param(*row[1:], id=row[0]) for row in FLAGS])
+def test_flags_table(raw: bytes, flags: list[str]) -> None:
+    r = one(raw)
+    assert r.flags == flags
+    assert_flags([r])
+    assert json.loads(json.dumps(r.to_dict()))["flags"] == flags
+
+
 def test_unknown_command_summary() -> None:
     r = one(frame(Q, 3, 0xA5, "10 20 30"))
     assert r.ok
@@ -606,11 +658,14 @@ def test_records_do_not_share_lists() -> None:
     a, b = decode(raw)
     a.errors.append("added by a later stage")
     a.warnings.append("added by a later stage")
+    a.flags.append(F.UNANSWERED)
     assert b.errors == ["checksum error: expected 0xC8, got 0x74"]
     assert b.warnings == []
+    assert b.flags == [F.BAD_CHECKSUM]
     (c,) = decode(raw[:8])
     assert c.errors == ["checksum error: expected 0xC8, got 0x74"]
     assert c.warnings == []
+    assert c.flags == [F.BAD_CHECKSUM]
 
 
 def test_cache_stays_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -626,6 +681,17 @@ def test_make_record_never_raises_on_odd_bytes() -> None:
     for raw in (b"", b"\xeb", h("EB 90 01"), h("EB 90 01 05 10"), h("AA BB 01 01 16 18")):
         r = dec.make_record(raw, 0, None, False)
         assert r.errors and r.errors[0].startswith("malformed frame")
+        assert r.flags == [F.MALFORMED]
+
+
+def test_command_table_is_keyed_by_cmd() -> None:
+    """Every CMD byte is named once, in Cmd; the table describes each and takes its name."""
+    assert set(COMMANDS) == set(Cmd)
+    for code, cmd in COMMANDS.items():
+        assert isinstance(code, Cmd) and cmd.code is code
+        assert cmd.name == f"CMD_MC_{code.name}"
+    assert Cmd(0x10).name == "MOVE_CATCH_XG"
+    assert one(frame(Q, 1, Cmd.PARA_SAVE)).is_save
 
 
 # -- frame_at and next_start ---------------------------------------------------------------
@@ -824,11 +890,11 @@ def test_live_feed_waits_for_the_rest_of_a_frame() -> None:
 
 NOT_HEADER = st.binary(max_size=20).map(lambda b: bytes(x for x in b if x not in (0xEB, 0xEE)))
 VALID_FRAME = st.builds(
-    build_frame,
-    st.sampled_from((REQUEST, RESPONSE)),
+    serial_frame,
     st.integers(0, 255),
     st.integers(0, 255),
     st.binary(max_size=24),
+    st.booleans(),
 )
 CHUNK_SIZES = st.lists(st.integers(1, 40), min_size=1, max_size=8)
 
@@ -884,5 +950,5 @@ def test_decoded_fields_survive_reencoding(frames: list[bytes], sizes: list[int]
         assert r.direction in (REQUEST, RESPONSE)
         assert r.code is not None and r.device is not None
         assert r.name is not None and r.summary
-        rebuilt = build_frame(r.direction, r.device, r.code, r.raw[5:-1])
+        rebuilt = serial_frame(r.device, r.code, r.raw[5:-1], r.direction == RESPONSE)
         assert rebuilt == r.raw

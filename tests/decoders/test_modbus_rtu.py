@@ -5,9 +5,10 @@ arrive (whole, in chunks, one at a time, with or without timing)."""
 
 from __future__ import annotations
 
+import ast
+import inspect
 import json
 import random
-import struct
 from typing import Any
 
 import pytest
@@ -19,20 +20,21 @@ from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
 from pymodbus.pdu import bit_message as bm
 from pymodbus.pdu import register_message as rm
 
-from decoders import modbus_rtu
+from decoders import build as b
+from decoders import flags as F
+from decoders import modbus_framing, modbus_pdu, modbus_registers, modbus_rtu
+from decoders.build import with_crc
 from decoders.framing import NEED_MORE
-from decoders.modbus_rtu import (
+from decoders.modbus_framing import (
     CRC_BAD,
     CRC_OK,
-    CRC_SWAPPED,
     CRC_SWAPPED_ORDER,
     KIND,
-    NO_REQUEST,
-    ModbusRtuDecoder,
     candidates,
     crc_state,
-    with_crc,
 )
+from decoders.modbus_pdu import CRC_SWAPPED, NO_REQUEST
+from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import FRAME, GARBAGE, MODBUS_RTU, REQUEST, RESPONSE, TRUNCATED, Chunk, Record
 
 
@@ -47,30 +49,12 @@ def swap_crc(frame: bytes) -> bytes:
     return frame[:-2] + frame[-1:] + frame[-2:-1]
 
 
-def rd(slave: int, start: int, count: int, fc: int = 3) -> bytes:
-    return with_crc(struct.pack(">BBHH", slave, fc, start, count))
-
-
-def rd_resp(slave: int, values: list[int], fc: int = 3) -> bytes:
-    data = b"".join(struct.pack(">H", v & 0xFFFF) for v in values)
-    return with_crc(bytes((slave, fc, len(data))) + data)
-
-
-def wr(slave: int, register: int, value: int) -> bytes:
-    return with_crc(struct.pack(">BBHH", slave, 6, register, value & 0xFFFF))
-
-
-def wrm(slave: int, start: int, values: list[int]) -> bytes:
-    data = b"".join(struct.pack(">H", v & 0xFFFF) for v in values)
-    return with_crc(struct.pack(">BBHHB", slave, 0x10, start, len(values), len(data)) + data)
-
-
-def wrm_resp(slave: int, start: int, count: int) -> bytes:
-    return with_crc(struct.pack(">BBHH", slave, 0x10, start, count))
-
-
-def exc(slave: int, fc: int, code: int) -> bytes:
-    return with_crc(bytes((slave, fc | 0x80, code)))
+rd = b.modbus_read_request
+rd_resp = b.modbus_read_response
+wr = b.modbus_write_single
+wrm = b.modbus_write_multiple
+wrm_resp = b.modbus_write_multiple_response
+exc = b.modbus_exception
 
 
 _framer = FramerRTU(DecodePDU(False))
@@ -146,6 +130,22 @@ def assert_accounting(records: list[Record], data: bytes) -> None:
             assert r.errors
         pos += r.length
     assert pos == len(data)
+    assert_flags(records)
+
+
+WORDLESS = frozenset({F.EXCEPTION_RESPONSE})  # said by the summary, not by a warning
+
+
+def assert_flags(records: list[Record]) -> None:
+    """Every error and warning has its code, each code at most once; no code without words
+    but an exception response's."""
+    for r in records:
+        assert len(set(r.flags)) == len(r.flags), r.flags
+        assert set(r.flags) <= F.ALL
+        worded = set(r.flags) - WORDLESS
+        assert bool(worded) == bool(r.errors or r.warnings), (r.flags, r.errors, r.warnings)
+        assert len(worded) <= len(r.errors) + len(r.warnings)
+        assert (F.EXCEPTION_RESPONSE in r.flags) == (r.name == "EXCEPTION")
 
 
 def signature(records: list[Record]) -> list[tuple[Any, ...]]:
@@ -165,6 +165,7 @@ def signature(records: list[Record]) -> list[tuple[Any, ...]]:
             r.pair_key,
             r.expects_response,
             r.is_save,
+            tuple(r.flags),
         )
         for r in records
     ]
@@ -439,7 +440,9 @@ TABLE: list[tuple[str, list[bytes], str, int, str | None, dict[str, Any], str, l
      "read 0 registers from 1061", ["count 0 outside the Modbus limit of 1-125 registers"]),
     ("broadcast write", [wr(0, 1006, 1)], REQUEST, 6, "CMD_STOP", {"slave": 0, "value": 1},
      "write stop=1", []),
-    ("read input registers", [rd(1, 1061, 1, fc=4), rd_resp(1, [10], fc=4)], RESPONSE, 4,
+    ("read input registers",
+     [pm(rm.ReadInputRegistersRequest(address=1061, count=1, dev_id=1)),
+      pm(rm.ReadInputRegistersResponse(registers=[10], dev_id=1))], RESPONSE, 4,
      "CMD_OPENLEN_ACT", {"values": {"CMD_OPENLEN_ACT": 10}}, "-> measured_opening=10 (0.7 mm)",
      [f"function 4 (read input registers) {NOT_EG2}"]),
     ("read coils", [pm(bm.ReadCoilsRequest(address=0, count=10, dev_id=2))], REQUEST, 1,
@@ -487,6 +490,68 @@ def test_decode_table(
     assert r.summary == summary
     assert r.warnings == warnings
     json.dumps(r.to_dict())  # the JSONL contract holds
+
+
+# (id, stream: setup frames then the frame checked, direction hints or None, its flags)
+MANUAL_READ_BAD_CRC = h("01 03 04 25 00 04 86 21")
+MANUAL_RESPONSE = h("01 03 08 00 00 FF FE 00 25 00 00 C7 B9")  # CRC high byte first
+COIL_0x1234 = with_crc(h("02 05 00 03 12 34"))
+# fmt: off
+FLAGS: list[tuple[str, list[bytes], list[str | None] | None, list[str]]] = [
+    ("read request", [rd(1, 1061, 4)], None, []),
+    ("read response", [rd(1, 1061, 4), rd_resp(1, [0, 2, 37, 0])], None, []),
+    ("swapped CRC", [swap_crc(wr(1, 1010, 0))], None, [F.SWAPPED_CRC]),
+    ("bad CRC", [MANUAL_READ_BAD_CRC], None, [F.BAD_CHECKSUM]),
+    ("named from a bad request", [MANUAL_READ_BAD_CRC, MANUAL_RESPONSE], None,
+     [F.SWAPPED_CRC, F.UNTRUSTED_REQUEST]),
+    ("read response alone", [rd_resp(1, [1, 2])], None, [F.ORPHAN_RESPONSE]),
+    ("count mismatch", [rd(1, 1061, 2), rd_resp(1, [1, 2, 3])], None, [F.LENGTH_MISMATCH]),
+    ("value out of range (fast path)", [rd(1, 1063, 1), rd_resp(1, [8704])], None,
+     [F.OUT_OF_RANGE]),
+    ("two values out of range: one code", [rd(1, 1062, 2), rd_resp(1, [0x8000, 8704])], None,
+     [F.OUT_OF_RANGE]),
+    ("write out of range", [wr(1, 1011, 5000)], None, [F.OUT_OF_RANGE]),
+    ("write multiple out of range", [wrm(1, 1010, [2000, 5, 5])], None, [F.OUT_OF_RANGE]),
+    ("read count 0", [rd(1, 1061, 0)], None, [F.OUT_OF_RANGE]),
+    ("read count 126", [rd(1, 1001, 126)], None, [F.UNDOCUMENTED, F.OUT_OF_RANGE]),
+    ("write to read-only", [wr(1, 1061, 5)], None, [F.READ_ONLY_WRITE]),
+    ("undocumented register", [wr(1, 1008, 7)], None, [F.UNDOCUMENTED]),
+    ("outside the map", [rd(1, 1064, 4)], None, [F.UNDOCUMENTED]),
+    ("short numbers, first frame", [rd(1, 61, 5)], None, [F.SHORT_REGISTER_NUMBERS]),
+    ("short numbers, later frames", [rd(1, 61, 5), rd_resp(1, [1, 2, 3, 4, 1])], None, []),
+    ("short numbers, later frame out of range", [rd(1, 63, 1), rd_resp(1, [8704])], None,
+     [F.OUT_OF_RANGE]),
+    ("exception", [rd(1, 1061, 4), exc(1, 3, 2)], None, [F.EXCEPTION_RESPONSE]),
+    ("exception, unknown code", [exc(9, 3, 0x42)], None,
+     [F.EXCEPTION_RESPONSE, F.UNDOCUMENTED]),
+    ("echo", [wr(1, 1010, 500), wr(1, 1010, 500)], None, []),
+    ("echo differs", [wr(1, 1010, 500), wr(1, 1010, 501)], [REQUEST, RESPONSE],
+     [F.RESPONSE_MISMATCH]),
+    ("echo without request", [wr(1, 1010, 500)], [RESPONSE], [F.ORPHAN_RESPONSE]),
+    ("write response without request", [wrm_resp(1, 1010, 3)], None, [F.ORPHAN_RESPONSE]),
+    ("write response mismatch", [wrm(1, 1010, [1, 2, 3]), wrm_resp(1, 1011, 3)], None,
+     [F.RESPONSE_MISMATCH, F.UNDOCUMENTED]),
+    ("response from address 0", [rd_resp(0, [1])], None, [F.BROADCAST, F.ORPHAN_RESPONSE]),
+    ("broadcast write", [wr(0, 1006, 1)], None, []),
+    ("not an EG2 function", [pm(bm.ReadCoilsRequest(address=0, count=10, dev_id=2))], None,
+     [F.UNDOCUMENTED]),
+    ("coil value neither on nor off", [COIL_0x1234], None, [F.UNDOCUMENTED, F.OUT_OF_RANGE]),
+]
+# fmt: on
+
+
+@pytest.mark.parametrize(
+    ("stream", "hints", "flags"), [pytest.param(*row[1:], id=row[0]) for row in FLAGS]
+)
+def test_flags_table(stream: list[bytes], hints: list[str | None] | None, flags: list[str]) -> None:
+    """Every error and warning text carries its code (issue 6); each code once per record."""
+    per_byte = None if hints is None else [d for f, d in zip(stream, hints, strict=True) for _ in f]
+    for sizes, chunk_hints in (([len(f) for f in stream], hints), ([1], per_byte)):
+        records = decode(b"".join(stream), sizes, hints=chunk_hints)
+        assert [r.length for r in records] == [len(f) for f in stream]
+        r = records[-1]
+        assert r.flags == flags, (r.errors, r.warnings)
+        assert json.loads(json.dumps(r.to_dict()))["flags"] == flags
 
 
 def test_exception_pairing_attributes() -> None:
@@ -586,6 +651,103 @@ def test_same_response_bytes_named_by_their_request() -> None:
     assert records[4].warnings == [NO_REQUEST]
 
 
+# -- retransmissions: a host resends the same request before the answer (issue 7 item 17) --------
+
+POLL = pm(rm.ReadHoldingRegistersRequest(address=1061, count=2, dev_id=1))  # as pymodbus sends it
+POLL_NAME = "CMD_OPENLEN_ACT..CMD_CURRENT"
+SET = pm(rm.WriteMultipleRegistersRequest(address=1010, registers=[0, 500], dev_id=1))
+SET_DONE = pm(rm.WriteMultipleRegistersResponse(address=1010, count=2, dev_id=1))
+
+# (id, frames, what each response is named (None: not a response), the last response's
+#  warnings)
+RETRIES: list[tuple[str, list[bytes], list[str | None], list[str]]] = [
+    (
+        "two answers",
+        [POLL, POLL, rd_resp(1, [10, 1]), rd_resp(1, [11, 1])],
+        [None, None, POLL_NAME, POLL_NAME],
+        [],
+    ),
+    (
+        "three tries, three answers",
+        [POLL, POLL, POLL, rd_resp(1, [10, 1]), rd_resp(1, [11, 1]), rd_resp(1, [12, 1])],
+        [None, None, None, POLL_NAME, POLL_NAME, POLL_NAME],
+        [],
+    ),
+    (
+        "one answer, then the next poll",
+        [POLL, POLL, rd_resp(1, [10, 1]), POLL, rd_resp(1, [11, 1])],
+        [None, None, POLL_NAME, None, POLL_NAME],
+        [],
+    ),
+    (
+        "one answer, then other registers",
+        [POLL, POLL, rd_resp(1, [10, 1]), rd(1, 1063, 1), rd_resp(1, [36])],
+        [None, None, POLL_NAME, None, "CMD_TEMP"],
+        [],
+    ),
+    (
+        # the copy left unanswered is given up by the next request: no stale third answer
+        "a stale copy is dropped",
+        [POLL, POLL, rd_resp(1, [10, 1]), POLL, rd_resp(1, [11, 1]), rd_resp(1, [12, 1])],
+        [None, None, POLL_NAME, None, POLL_NAME, None],
+        [NO_REQUEST],
+    ),
+    (
+        "more answers than tries",
+        [POLL, POLL, rd_resp(1, [10, 1]), rd_resp(1, [11, 1]), rd_resp(1, [12, 1])],
+        [None, None, POLL_NAME, POLL_NAME, None],
+        [NO_REQUEST],
+    ),
+    (
+        "write multiple",
+        [SET, SET, SET_DONE, SET_DONE],
+        [None, None, "CMD_OPENLEN_SET..CMD_SPEED_SET", "CMD_OPENLEN_SET..CMD_SPEED_SET"],
+        [],
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    ("frames", "names", "warnings"), [pytest.param(*row[1:], id=row[0]) for row in RETRIES]
+)
+def test_retransmitted_request_each_answer_decoded_against_its_request(
+    frames: list[bytes], names: list[str | None], warnings: list[str]
+) -> None:
+    data = b"".join(frames)
+    whole = decode(data)
+    assert [r.length for r in whole] == [len(f) for f in frames]
+    assert [r.name if r.direction == RESPONSE else None for r in whole] == names
+    for r in whole:
+        if r.direction == RESPONSE and r.name == POLL_NAME:
+            assert set(r.fields["values"]) == {"CMD_OPENLEN_ACT", "CMD_CURRENT"}
+    assert whole[-1].warnings == warnings
+    assert all(not r.warnings for r in whole[:-1])
+    # however the bytes arrive
+    assert signature(decode(data, [1])) == signature(whole)
+    assert signature(decode(data, [len(f) for f in frames])) == signature(whole)
+    assert signature(decode(data, random_sizes(random.Random(2), len(data)))) == signature(whole)
+
+
+def test_retransmitted_write_single_with_known_directions() -> None:
+    """A write single and its echo are the same bytes: with the directions known (a tap on
+    each wire), both echoes of a retried write answer it."""
+    write = wr(1, 1010, 500)
+    records = frames_fed([write] * 4, [REQUEST, REQUEST, RESPONSE, RESPONSE])
+    assert [r.direction for r in records] == [REQUEST, REQUEST, RESPONSE, RESPONSE]
+    assert [r.summary for r in records[2:]] == ["-> ok (echo)", "-> ok (echo)"]
+    assert not any(r.warnings for r in records)
+
+
+def test_outstanding_requests_are_counted() -> None:
+    dec = ModbusRtuDecoder()
+    dec.feed(Chunk(POLL + POLL, None, REQUEST))
+    assert (dec.pending, dec.outstanding) == ((1, 3, 1061, 2, True), 2)
+    dec.feed(Chunk(rd_resp(1, [10, 1]), None, RESPONSE))
+    assert dec.outstanding == 1
+    dec.feed(Chunk(rd_resp(1, [11, 1]), None, RESPONSE))
+    assert (dec.pending, dec.outstanding) == (None, 0)
+
+
 def test_records_do_not_share_lists() -> None:
     frame = swap_crc(wr(1, 1011, 5000))
     a, b = decode(frame + frame)[0], decode(frame + frame)[0]
@@ -594,8 +756,30 @@ def test_records_do_not_share_lists() -> None:
     assert records[0].warnings is not records[2].warnings
     assert records[0].errors is not records[2].errors
     records[0].warnings.append("added by the linter")
+    records[0].flags.append(F.CLOSER_THAN_5MS)
     assert "added by the linter" not in records[2].warnings
+    assert records[2].flags == [F.SWAPPED_CRC, F.OUT_OF_RANGE]
     assert a.warnings == b.warnings == [CRC_SWAPPED, "speed out of range (10-1000): 5000"]
+
+
+def test_framing_and_meaning_are_separate_modules() -> None:
+    """Framing (candidate lengths, CRC) knows nothing of what frames mean; the decoder class
+    joins the two and stays importable from modbus_rtu."""
+
+    def imports(module: Any) -> set[str]:
+        tree = ast.parse(inspect.getsource(module))
+        return {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+
+    assert imports(modbus_framing).isdisjoint({"modbus_pdu", "modbus_registers", "modbus_rtu"})
+    assert imports(modbus_registers).isdisjoint({"modbus_pdu", "modbus_rtu"})
+    assert "modbus_rtu" not in imports(modbus_pdu)
+    assert {"modbus_framing", "modbus_pdu"} <= imports(modbus_rtu)
+    assert issubclass(ModbusRtuDecoder, modbus_framing.ModbusFramer)
+    assert ModbusRtuDecoder.__module__ == "decoders.modbus_rtu"
+    # frames are built in decoders.build only
+    for name in ("with_crc", "crc_bytes"):
+        for module in (modbus_rtu, modbus_framing, modbus_pdu, modbus_registers):
+            assert not hasattr(module, name), (module.__name__, name)
 
 
 def test_bus_name_and_defaults() -> None:
@@ -1147,7 +1331,11 @@ def valid_frames(draw: st.DrawFn) -> bytes:
     slave = draw(_slaves)
     shape = draw(st.sampled_from(["rd", "rd_resp", "wr", "wrm", "wrm_resp", "exc", "coils"]))
     if shape == "rd":
-        frame = rd(slave, draw(_u16), draw(st.integers(1, 125)), draw(st.sampled_from((3, 4))))
+        start, count = draw(_u16), draw(st.integers(1, 125))
+        if draw(st.booleans()):
+            frame = rd(slave, start, count)
+        else:
+            frame = pm(rm.ReadInputRegistersRequest(address=start, count=count, dev_id=slave))
     elif shape == "rd_resp":
         frame = rd_resp(slave, draw(st.lists(_u16, min_size=1, max_size=125)))
     elif shape == "wr":
@@ -1205,7 +1393,7 @@ def test_valid_frames_between_garbage_are_found(
 @given(frame=valid_frames(), hint=st.sampled_from([None, REQUEST, RESPONSE]))
 def test_decode_any_frame(frame: bytes, hint: str | None) -> None:
     for pending in (None, (frame[0], frame[1] & 0x7F, 1061, 5, True), (frame[0], 3, 0, 0, False)):
-        e = modbus_rtu.decode(frame, pending, hint)
+        e = modbus_pdu.decode(frame, pending, hint)
         direction, fields, summary, errors, nxt = e[0], e[2], e[3], e[4], e[9]
         assert fields["slave"] == frame[0]
         assert errors == ()
@@ -1225,7 +1413,7 @@ def test_decode_any_frame(frame: bytes, hint: str | None) -> None:
 )  # fmt: skip
 def test_decode_rejects_shapeless_bytes(raw: bytes, error: str) -> None:
     """decode() is public: bytes no framer would hand it get an error, not an exception."""
-    e = modbus_rtu.decode(raw)
+    e = modbus_pdu.decode(raw)
     assert e[4] == (error,)
     assert e[0] is None
 
@@ -1244,6 +1432,6 @@ def test_read_response_fast_path_matches_the_general_decode(
     if swapped:
         frame = swap_crc(frame)
     pending = (slave, 3, start, len(values), True)
-    fast = modbus_rtu.decode(frame, pending, None)
-    general = modbus_rtu._decode(frame, pending, None, None)
+    fast = modbus_pdu.decode(frame, pending, None)
+    general = modbus_pdu._decode(frame, pending, None, None)
     assert fast == general

@@ -1,30 +1,33 @@
-"""MCAP recording: what McapRecorder writes, read back with the mcap library and with
-McapCaptureReader; damaged and truncated files."""
+"""MCAP recording: what McapRecorder (a session listener) writes, read back with the mcap
+library and with this project's readers; the recorder inside a real session."""
 
 from __future__ import annotations
 
 import base64
-import shutil
+import importlib.util
 from pathlib import Path
 
 import orjson
 import pytest
 from mcap.reader import make_reader
+from mcap_checks import assert_time_ordered, mcap_messages
 
-from analyzer import __version__
-from analyzer.pipeline import Decoding, Item
-from analyzer.sinks import mcap as sink
-from analyzer.sinks.mcap import McapRecorder, topic_part
-from analyzer.sources import mcap_reader
-from analyzer.sources.capture import open_capture
-from analyzer.sources.live import ERROR, INFO, WARNING, SourceEvent
-from analyzer.sources.mcap_reader import (
+from analyzer import __version__, recording
+from analyzer.listener import Listener, make_listener
+from analyzer.model import ERROR, INFO, WARNING, Item, SourceEvent, StateSample
+from analyzer.pipeline import Decoding
+from analyzer.recording import (
     McapCaptureReader,
+    McapRecorder,
     read_events,
     read_metadata,
     read_records,
     read_states,
+    topic_part,
 )
+from analyzer.session import Session
+from analyzer.sources.capture import open_capture
+from analyzer.sources.source import CaptureSource
 from analyzer.tracker import Tracker
 from decoders import build as b
 from decoders.model import CanFrame, Chunk, Record
@@ -74,50 +77,77 @@ def record(seq: int, **kw: object) -> Record:
     return Record(**base)  # type: ignore[arg-type]
 
 
-def mcap_messages(path: Path) -> list[tuple[str, str, str, str, int, dict]]:
-    """(topic, schema name, schema encoding, message encoding, log time, message) of every
-    message, through the mcap library's own reader."""
-    with path.open("rb") as f:
-        reader = make_reader(f)
-        return [
-            (ch.topic, sc.name, sc.encoding, ch.message_encoding, m.log_time, orjson.loads(m.data))
-            for sc, ch, m in reader.iter_messages(log_time_order=False)
-        ]
+def sample_records() -> list[Record]:
+    return [
+        record(0),
+        record(1, direction="response", errors=["bad CRC: expected 1234"], flags=["bad_checksum"]),
+        record(2, warnings=["no response within 50 ms"], flags=["unanswered"], device=None),
+    ]
+
+
+def opening_reading(seq: int, t: float, opening: int) -> Record:
+    return Record(
+        t=t,
+        bus="can0",
+        protocol="eg2-can",
+        kind="frame",
+        length=2,
+        raw=opening.to_bytes(2, "little"),
+        direction="response",
+        device=1,
+        name="CMD_OPENLEN_ACT",
+        fields={"address": 0x46, "values": {"CMD_OPENLEN_ACT": opening}},
+        seq=seq,
+    )
+
+
+def sample_states() -> list[StateSample]:
+    """Two readings of one gripper, from the real Tracker: one sample each."""
+    tracker = Tracker()
+    readings = [opening_reading(10, T0 + 0.010, 300), opening_reading(11, T0 + 0.011, 300)]
+    samples = tracker.update_many(readings)
+    assert len(samples) == 2
+    return samples
 
 
 @pytest.fixture
-def recording(tmp_path: Path) -> Path:
+def recorded(tmp_path: Path) -> Path:
+    """One recording made through the listener calls, as a session makes them."""
     path = tmp_path / "run.mcap"
-    tracker = Tracker()
     with McapRecorder(path, META) as rec:
-        for item in sample_items():
-            rec.write_item(item)
-        rec.write_record(record(0))
-        rec.write_record(record(1, direction="response", errors=["bad CRC: expected 1234"]))
-        rec.write_record(record(2, warnings=["no response within 50 ms"], device=None))
-        ok = Record(
-            t=T0 + 0.01,
-            bus="can0",
-            protocol="eg2-can",
-            kind="frame",
-            length=2,
-            raw=b"\x2c\x01",
-            direction="response",
-            device=1,
-            name="CMD_OPENLEN_ACT",
-            fields={"address": 0x46, "values": {"CMD_OPENLEN_ACT": 300}},
-        )
-        state = tracker.update(ok)
-        assert state is not None
-        rec.write_state(state)
-        rec.write_state(state.to_dict())
-        rec.write_event(SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops"))
-        rec.write_event(SourceEvent(T0 + 0.03, "ttyUSB0", INFO, "port reopened", "reopened"))
+        rec.on_raw(sample_items())
+        rec.on_records(sample_records())
+        rec.on_states(sample_states())
+        rec.on_event(SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops"))
+        rec.on_event(SourceEvent(T0 + 0.03, "ttyUSB0", INFO, "port reopened", "reopened", 7))
+        rec.write_mark(T0 + 0.04, "gripper slipped", 11)
+        rec.tick(T0)  # one batch: sorted by time, the untimed chunk (wall clock) last
+    assert_time_ordered(path)
     return path
 
 
-def test_layout_topics_schemas_encodings(recording: Path) -> None:
-    msgs = mcap_messages(recording)
+def test_recorder_is_a_listener_found_by_name(tmp_path: Path) -> None:
+    rec = make_listener("mcap", tmp_path / "x.mcap", metadata={"passive": "yes"})
+    try:
+        assert isinstance(rec, McapRecorder) and isinstance(rec, Listener)
+        assert rec.wants_raw and rec.wants_states
+    finally:
+        rec.close()
+    # the per-item writers are gone: a session calls the listener hooks with whole batches
+    for dead in ("write_item", "write_items", "write_record", "write_records", "write_state"):
+        assert not hasattr(McapRecorder, dead), dead
+
+
+def test_reader_and_writer_live_in_one_module(recorded: Path) -> None:
+    for gone in ("analyzer.sinks.mcap", "analyzer.sources.mcap_reader"):
+        assert importlib.util.find_spec(gone) is None, gone
+    with open_capture(recorded) as reader:
+        assert type(reader) is recording.McapCaptureReader
+    assert recording.McapRecorder.__module__ == recording.McapCaptureReader.__module__
+
+
+def test_layout_topics_schemas_encodings(recorded: Path) -> None:
+    msgs = mcap_messages(recorded)
     topics = {m[0]: (m[1], m[2], m[3]) for m in msgs}
     assert topics == {
         "/raw/ttyUSB0": ("eg2scope.RawChunk", "jsonschema", "json"),
@@ -128,8 +158,9 @@ def test_layout_topics_schemas_encodings(recording: Path) -> None:
         "/state/can0/1": ("eg2scope.DeviceState", "jsonschema", "json"),
         "/events/can0": ("foxglove.Log", "jsonschema", "json"),
         "/events/ttyUSB0": ("foxglove.Log", "jsonschema", "json"),
+        "/marks": ("eg2scope.Mark", "jsonschema", "json"),
     }
-    with recording.open("rb") as f:
+    with recorded.open("rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
     for schema in summary.schemas.values():
@@ -140,11 +171,23 @@ def test_layout_topics_schemas_encodings(recording: Path) -> None:
     raw = next(orjson.loads(s.data) for s in summary.schemas.values() if s.name.endswith("Chunk"))
     assert raw["properties"]["data"] == {"type": "string", "contentEncoding": "base64"}
     for ch in summary.channels.values():
-        assert ch.metadata["bus"] in ch.topic
+        if ch.topic != "/marks":
+            assert ch.metadata["bus"] in ch.topic
 
 
-def test_raw_messages_match_items(recording: Path) -> None:
-    raw = [m for m in mcap_messages(recording) if m[0].startswith("/raw/")]
+def test_every_key_written_is_in_its_schema(recorded: Path) -> None:
+    """Foxglove reads the schema to offer plot paths: no key may be missing from it."""
+    with recorded.open("rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages():
+            assert schema is not None
+            props = orjson.loads(schema.data)["properties"]
+            keys = set(orjson.loads(message.data))
+            assert keys <= set(props), (channel.topic, keys - set(props))
+
+
+def test_raw_messages_match_items(recorded: Path) -> None:
+    raw = [m for m in mcap_messages(recorded) if m[0].startswith("/raw/")]
     items = sample_items()
     assert len(raw) == len(items)
     for (topic, _sn, _se, _me, log_time, msg), item in zip(raw, items, strict=True):
@@ -167,34 +210,30 @@ def test_raw_messages_match_items(recording: Path) -> None:
             assert (msg["stream"], msg["direction"]) == (item.stream, p.direction)
 
 
-def test_decoded_state_and_event_messages(recording: Path) -> None:
-    msgs = mcap_messages(recording)
+def test_decoded_state_event_and_mark_messages(recorded: Path) -> None:
+    msgs = mcap_messages(recorded)
     decoded = [m[5] for m in msgs if m[0] == "/decoded/can0"]
-    assert decoded == [
-        orjson.loads(orjson.dumps(r.to_dict()))
-        for r in (
-            record(0),
-            record(1, direction="response", errors=["bad CRC: expected 1234"]),
-            record(2, warnings=["no response within 50 ms"], device=None),
-        )
-    ]
+    assert decoded == [orjson.loads(orjson.dumps(r.to_dict())) for r in sample_records()]
+    assert decoded[1]["flags"] == ["bad_checksum"]
     states = [m for m in msgs if m[0] == "/state/can0/1"]
-    assert len(states) == 2
-    for *_, log_time, st in states:
+    # one message per sample, each at its own record's time, the sample's whole state
+    assert [(log_time, st) for *_, log_time, st in states] == [
+        (int(s.t * 1e9), orjson.loads(orjson.dumps(s.to_dict()))) for s in sample_states()
+    ]
+    for *_, st in states:
         # the Foxglove plot path /state/can0/1.opening_mm: a top-level number
         assert isinstance(st["opening_mm"], float) and st["opening"] == 300
-        assert (st["bus"], st["device"]) == ("can0", 1)
-        assert log_time == int((T0 + 0.01) * 1e9)
+        assert st["changed"] == ["opening"] and st["seq"] in (10, 11)
     logs = [(m[0], m[4], m[5]) for m in msgs if m[0].startswith("/events/")]
     # two records with problems (error, then warning) and the two source events
-    assert [(topic, d["level"], d["name"]) for topic, _, d in logs] == [
-        ("/events/can0", ERROR, "decode"),
-        ("/events/can0", WARNING, "decode"),
-        ("/events/can0", WARNING, "drops"),
-        ("/events/ttyUSB0", INFO, "reopened"),
+    assert [(topic, d["level"], d["name"], d["count"]) for topic, _, d in logs] == [
+        ("/events/can0", ERROR, "decode", 1),
+        ("/events/can0", WARNING, "decode", 1),
+        ("/events/can0", WARNING, "drops", 1),
+        ("/events/ttyUSB0", INFO, "reopened", 7),
     ]
     for _topic, log_time, d in logs:
-        assert set(d) == {"timestamp", "level", "message", "name", "file", "line"}
+        assert set(d) == {"timestamp", "level", "message", "name", "file", "line", "count"}
         ts = d["timestamp"]
         assert set(ts) == {"sec", "nsec"} and 0 <= ts["nsec"] < 1_000_000_000
         assert ts["sec"] * 1_000_000_000 + ts["nsec"] == log_time
@@ -202,10 +241,14 @@ def test_decoded_state_and_event_messages(recording: Path) -> None:
     assert logs[0][2]["message"] == "ID 1 set: bad CRC: expected 1234"
     assert logs[0][2]["line"] == 1  # the record's seq
     assert logs[2][2]["message"] == "dropped 3 frames"
+    marks = [(m[4], m[5]) for m in msgs if m[0] == "/marks"]
+    assert marks == [
+        (int((T0 + 0.04) * 1e9), {"t": T0 + 0.04, "name": "gripper slipped", "seq": 11})
+    ]
 
 
-def test_metadata_record(recording: Path) -> None:
-    with recording.open("rb") as f:
+def test_metadata_record(recorded: Path) -> None:
+    with recorded.open("rb") as f:
         metas = list(make_reader(f).iter_metadata())
     assert [m.name for m in metas] == ["eg2scope"]
     meta = metas[0].metadata
@@ -213,18 +256,26 @@ def test_metadata_record(recording: Path) -> None:
     assert meta["tool"] == "eg2scope" and meta["version"] == __version__
     assert meta["passive"] == "yes"
     assert orjson.loads(meta["sources"]) == META["sources"]
-    decoded = read_metadata(recording)
+    decoded = read_metadata(recorded)
     assert decoded["sources"] == META["sources"] and decoded["passive"] == "yes"
 
 
-def test_capture_reader_yields_the_items(recording: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_capture_reader_yields_items_and_source_events(
+    recorded: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     def no_stream(*_a: object) -> None:
         raise AssertionError("an intact file must be read through its index")
 
-    monkeypatch.setattr(mcap_reader._Scan, "_streamed", no_stream)
+    monkeypatch.setattr(recording._Scan, "_streamed", no_stream)
     items = sample_items()
-    expected = sorted(items, key=lambda i: (i.payload.t is None, i.payload.t or 0))
-    with open_capture(recording) as reader:
+    events = [
+        SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops"),
+        SourceEvent(T0 + 0.03, "ttyUSB0", INFO, "port reopened", "reopened", 7),
+    ]
+    # the untimed chunk was stamped with the wall clock: last; the records' problems ("decode")
+    # are not source events (decoding the raw input again finds them again)
+    expected = [*items[:-1], *events, items[-1]]
+    with open_capture(recorded) as reader:
         assert isinstance(reader, McapCaptureReader)
         assert reader.kind == "mixed" and not reader.damaged
         assert reader.metadata["passive"] == "yes"
@@ -233,27 +284,23 @@ def test_capture_reader_yields_the_items(recording: Path, monkeypatch: pytest.Mo
         assert reader.position == reader.size
     assert got == expected
     # the bus override puts everything on one bus
-    with McapCaptureReader(recording, bus="x") as reader:
+    with McapCaptureReader(recorded, bus="x") as reader:
         assert {i.bus for i in reader} == {"x"}
 
 
-def test_records_events_states_read_back(recording: Path) -> None:
+def test_records_events_states_read_back(recorded: Path) -> None:
     errors: list[str] = []
-    recs = list(read_records(recording, errors))
-    assert [r.to_dict() for r in recs] == [
-        record(0).to_dict(),
-        record(1, direction="response", errors=["bad CRC: expected 1234"]).to_dict(),
-        record(2, warnings=["no response within 50 ms"], device=None).to_dict(),
-    ]
-    events = list(read_events(recording, errors))
-    assert [(e.bus, e.level, e.kind) for e in events] == [
-        ("can0", ERROR, "decode"),
-        ("can0", WARNING, "decode"),
-        ("can0", WARNING, "drops"),
-        ("ttyUSB0", INFO, "reopened"),
+    recs = list(read_records(recorded, errors))
+    assert [r.to_dict() for r in recs] == [r.to_dict() for r in sample_records()]
+    events = list(read_events(recorded, errors))
+    assert [(e.bus, e.level, e.kind, e.count) for e in events] == [
+        ("can0", ERROR, "decode", 1),
+        ("can0", WARNING, "decode", 1),
+        ("can0", WARNING, "drops", 1),
+        ("ttyUSB0", INFO, "reopened", 7),
     ]
     assert events[2] == SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops")
-    states = list(read_states(recording, errors))
+    states = list(read_states(recorded, errors))
     assert [s["opening"] for s in states] == [300, 300]
     assert errors == []
 
@@ -279,11 +326,13 @@ def test_redecoding_a_recording_gives_the_same_records(tmp_path: Path) -> None:
     items.sort(key=lambda i: i.payload.t or 0)
     path = tmp_path / "re.mcap"
     with McapRecorder(path, {}) as rec:
-        for item in items:
-            rec.write_item(item)
+        for k in range(0, len(items), 50):  # in batches, as a session gives them
+            rec.on_raw(items[k : k + 50])
+            rec.tick(0.0)
+    assert_time_ordered(path)
     direct = [r.to_dict() for r in Decoding().feed_many(items)]
     with McapCaptureReader(path) as reader:
-        again = [r.to_dict() for r in Decoding().feed_many(reader)]
+        again = [r.to_dict() for r in Decoding().feed_many(reader)]  # type: ignore[arg-type]
     assert len(direct) > 100
     assert again == direct
 
@@ -294,10 +343,12 @@ def test_topic_names_for_awkward_bus_names(tmp_path: Path) -> None:
     assert topic_part("COM3") == "COM3"
     path = tmp_path / "names.mcap"
     with McapRecorder(path, {}, compression="none") as rec:
-        rec.write_item(Item("/dev/ttyUSB0", Chunk(b"\x01", T0)))
-        rec.write_item(Item("rfc2217://host:4000", Chunk(b"\x02", T0 + 1)))
+        rec.on_raw([Item("/dev/ttyUSB0", Chunk(b"\x01", T0))])
+        rec.on_raw([Item("rfc2217://host:4000", Chunk(b"\x02", T0 + 1))])
+    assert_time_ordered(path)
     assert {m[0] for m in mcap_messages(path)} == {"/raw/dev/ttyUSB0", "/raw/rfc2217/host_4000"}
-    assert [i.bus for i in McapCaptureReader(path)] == ["/dev/ttyUSB0", "rfc2217://host:4000"]
+    with McapCaptureReader(path) as reader:
+        assert [i.bus for i in reader] == ["/dev/ttyUSB0", "rfc2217://host:4000"]
 
 
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
@@ -305,162 +356,114 @@ def test_compressions(tmp_path: Path, compression: str) -> None:
     path = tmp_path / f"{compression}.mcap"
     with McapRecorder(path, {}, compression=compression) as rec:
         assert rec.compression == compression
-        for item in sample_items():
-            rec.write_item(item)
-    assert len(list(McapCaptureReader(path))) == len(sample_items())
-
-
-def test_log_time_never_goes_back_within_a_topic(tmp_path: Path) -> None:
-    """A stream whose clock steps back keeps its order on replay; the exact t survives."""
-    items = [Item("s", Chunk(bytes([i]), t)) for i, t in enumerate([T0 + 2, T0 + 1, T0 + 3])]
-    path = tmp_path / "back.mcap"
-    with McapRecorder(path, {}) as rec:
-        for item in items:
-            rec.write_item(item)
-    log_times = [m[4] for m in mcap_messages(path)]
-    assert log_times == sorted(log_times)
-    assert list(McapCaptureReader(path)) == items
+        rec.on_raw(sample_items())
+    assert_time_ordered(path)
+    with McapCaptureReader(path) as reader:
+        assert len(list(reader)) == len(sample_items())
+    assert recording.best_compression() == "zstd"
 
 
 def test_closed_recorder_refuses_writes(tmp_path: Path) -> None:
     rec = McapRecorder(tmp_path / "c.mcap", {})
     rec.close()
     rec.close()  # twice is fine
-    with pytest.raises(ValueError):
-        rec.write_item(sample_items()[0])
+    for call in (
+        lambda: rec.on_raw(sample_items()),
+        lambda: rec.on_records(sample_records()),
+        lambda: rec.on_states(sample_states()),
+        lambda: rec.on_event(SourceEvent(T0, "can0", INFO, "x")),
+        lambda: rec.write_mark(T0, "x"),
+    ):
+        with pytest.raises(ValueError, match="is closed"):
+            call()
     with pytest.raises(ValueError):
         McapRecorder(tmp_path / "d.mcap", {}, compression="brotli")
 
 
-# -- damage -------------------------------------------------------------------------------------
+def test_a_detached_recorder_finishes_its_file(tmp_path: Path) -> None:
+    """The session tells a listener that failed through on_error: the recording still ends
+    with its index, readable as a finished file."""
+    path = tmp_path / "detached.mcap"
+    rec = McapRecorder(path, {})
+    rec.on_raw(sample_items())
+    rec.on_error(OSError(28, "No space left on device"))
+    with McapCaptureReader(path) as reader:
+        assert not reader.damaged and len(list(reader)) == len(sample_items())
 
 
-def many_items(n: int) -> list[Item]:
+# -- in a real session --------------------------------------------------------------------------
+
+
+def serial_capture() -> bytes:
+    """A host polling two grippers on RS232 (run state and position), a catch, noise."""
+    s = b.serial_frame
     out = []
-    for i in range(n):
-        t = T0 + i * 1e-3
-        if i % 3:
-            out.append(Item("can0", CanFrame(t, 0x100 + i % 7, i.to_bytes(4, "little"))))
-        else:
-            out.append(Item("ttyUSB0", Chunk(i.to_bytes(4, "little"), t, "request"), "tx"))
+    for k in range(60):
+        dev = 1 + k % 2
+        opening = 1000 - 10 * k
+        out.append(s(dev, 0x41))
+        out.append(s(dev, 0x41, bytes((4, 0, 35)) + b.u16le(opening, 100), response=True))
+        out.append(s(dev, 0xD9))
+        out.append(s(dev, 0xD9, b.u16le(opening), response=True))
+        if k == 30:
+            out.append(s(1, 0x10, b.u16le(500, 100)))
+            out.append(b"\x55\xaa\x00")
+            out.append(s(1, 0x10, b"\x01", response=True))
+    return b"".join(out)
+
+
+def can_capture() -> bytes:
+    """candump -L lines: two grippers polled for force/opening/current/temperature."""
+    lines = []
+    for k in range(120):
+        dev = 1 + k % 2
+        t = T0 + k * 0.006
+        for frame in (
+            b.can_read_request(dev, 1120, 8, t=t),
+            b.can_read_response(dev, 1120, b.u16le(100, 1000 - 5 * k, 20, 34), t=t + 0.0005),
+        ):
+            lines.append(
+                f"({frame.t:.6f}) can0 {frame.arbitration_id:08X}#{frame.data.hex().upper()}"
+            )
+    return ("\n".join(lines) + "\n").encode()
+
+
+def position_readings(records: list[Record]) -> list[tuple[int, int]]:
+    """(seq, opening) of every valid frame that reads a gripper's opening, from the record
+    alone (not from the Tracker): serial 0x41/0xD9 answers, CAN/Modbus register values."""
+    out = []
+    for r in records:
+        if r.kind != "frame" or r.errors or r.direction != "response":
+            continue
+        values = r.fields.get("values")
+        if isinstance(values, dict) and "CMD_OPENLEN_ACT" in values:
+            out.append((r.seq, values["CMD_OPENLEN_ACT"]))
+        elif "position" in r.fields:
+            out.append((r.seq, r.fields["position"]))
     return out
 
 
-def test_open_recording_copied_mid_session_is_recovered(tmp_path: Path) -> None:
-    """What a SIGKILL leaves: the file as it is while the recorder is still open, after a
-    flush period; everything written before the flush is there, with a clear message."""
-    items = many_items(300)
-    path, copy = tmp_path / "live.mcap", tmp_path / "copy.mcap"
-    rec = McapRecorder(path, META, flush_interval_s=3600)
-    for item in items[:200]:
-        rec.write_item(item)
-    rec.flush_interval_s = 0.0
-    rec.tick()  # what the live loop does when idle
-    rec.flush_interval_s = 3600
-    for item in items[200:]:
-        rec.write_item(item)  # in the chunk in progress: not on disk yet
-    shutil.copyfile(path, copy)
-    rec.close()
-    with McapCaptureReader(copy) as reader:
-        assert reader.damaged
-        assert reader.metadata["passive"] == "yes"
-        assert reader.kind == "mixed"
-        got = list(reader)
-        assert got == items[:200]
-        assert len(reader.errors) == 1
-        msg = reader.errors[0]
-        assert msg.startswith("recovered a damaged recording: read 200 raw messages up to byte ")
-        assert f" of {copy.stat().st_size}; the rest is lost" in msg
-    assert list(McapCaptureReader(path)) == items  # the finished file has it all
-
-
-def test_truncated_at_any_offset_never_raises(tmp_path: Path) -> None:
-    items = many_items(240)
-    path = tmp_path / "whole.mcap"
-    with McapRecorder(path, META, chunk_size=1500) as rec:
-        for i, item in enumerate(items):
-            rec.write_item(item)
-            if i % 40 == 0:
-                rec.write_record(record(i, t=item.payload.t))
-                rec.write_event(SourceEvent(item.payload.t or 0, "can0", INFO, f"e{i}", "info"))
-    data = path.read_bytes()
-    size = len(data)
-    with path.open("rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None and len(summary.chunk_indexes) > 5
-    data_end = max(c.chunk_start_offset + c.chunk_length for c in summary.chunk_indexes)
-    offsets = sorted(
-        {0, 1, 7, 8, 9, 20, 60, size - 1, size - 8, size - 9, size - 30}
-        | set(range(0, size, max(1, size // 37)))
-        | {c.chunk_start_offset + d for c in summary.chunk_indexes[:4] for d in (0, 1, 30)}
-    )
-    cut = tmp_path / "cut.mcap"
-    previous = -1
-    for off in offsets:
-        cut.write_bytes(data[:off])
-        with McapCaptureReader(cut) as reader:
-            got = list(reader)
-            errors = reader.errors
-        assert got == items[: len(got)], off  # a prefix, in order
-        assert errors, f"no message for a file cut at {off} of {size}"
-        assert len(got) >= previous, off  # more bytes never give fewer items
-        previous = len(got)
-        if off > data_end + 64:  # only the summary/footer is cut: nothing lost
-            assert len(got) == len(items), off
-        recs_errors: list[str] = []
-        recs = list(read_records(cut, recs_errors))
-        evs = list(read_events(cut, recs_errors))
-        assert [r.seq for r in recs] == list(range(0, 40 * len(recs), 40))
-        assert [e.message for e in evs] == [f"e{40 * k}" for k in range(len(evs))]
-        assert recs_errors
-    cut.write_bytes(b"not an mcap file at all, just some bytes " * 3)
-    with McapCaptureReader(cut) as reader:
-        assert list(reader) == []
-        assert reader.errors and "not a readable MCAP" in reader.errors[0]
-
-
-def test_sink_module_exports() -> None:
-    assert sink.FOXGLOVE_LOG == "foxglove.Log"
-    assert sink.best_compression() == "zstd"
-
-
-def test_log_time_order_matches_the_mcap_library(tmp_path: Path) -> None:
-    """Two buses stamped by different threads interleave with jitter across chunk boundaries:
-    the reader's order is the mcap library's log-time order, intact or recovered."""
-    import random
-
-    rng = random.Random(5)
-    items = []
-    for i in range(600):
-        bus = "can0" if i % 2 else "ttyUSB0"
-        t = T0 + i * 1e-3 + rng.uniform(-0.004, 0.004)  # up to 8 positions out of order
-        p = (
-            CanFrame(t, 0x100, i.to_bytes(2, "little"))
-            if i % 2
-            else Chunk(i.to_bytes(2, "little"), t)
-        )
-        items.append(Item(bus, p))
-    path = tmp_path / "jitter.mcap"
-    with McapRecorder(path, {}, chunk_size=400) as rec:
-        for item in items:
-            rec.write_item(item)
-    with path.open("rb") as f:
-        reader = make_reader(f)
-        assert len(reader.get_summary().chunk_indexes) > 20  # type: ignore[union-attr]
-        library = [
-            (ch.topic, orjson.loads(m.data)["data"])
-            for _s, ch, m in reader.iter_messages(log_time_order=True)
-        ]
-    ours = [
-        ("/raw/" + i.bus, base64.b64encode(i.payload.data).decode())
-        for i in McapCaptureReader(path)
-    ]
-    assert ours == library
-    assert ours != [("/raw/" + i.bus, base64.b64encode(i.payload.data).decode()) for i in items]
-    # recovered from a damaged copy: the same order, for what is left
-    cut = tmp_path / "cut.mcap"
-    cut.write_bytes(path.read_bytes()[: path.stat().st_size * 2 // 3])
-    rd = McapCaptureReader(cut)
-    recovered = [("/raw/" + i.bus, base64.b64encode(i.payload.data).decode()) for i in rd]
-    assert rd.errors and len(recovered) > 300
-    assert recovered == [m for m in library if m in set(recovered)]
+@pytest.mark.parametrize(
+    ("name", "make"), [("poll.bin", serial_capture), ("poll.log", can_capture)]
+)
+def test_state_samples_match_the_readings_one_for_one(tmp_path: Path, name: str, make) -> None:
+    """A whole session into a recording: every reading is a /state message of its own, at its
+    record's time; the recording is in time order."""
+    capture = tmp_path / name
+    capture.write_bytes(make())
+    path = tmp_path / "session.mcap"
+    recorder = McapRecorder(path, {"capture": name}, chunk_size=4096)
+    with open_capture(capture) as reader:
+        counts = Session(CaptureSource(reader), [recorder]).run()
+    assert recorder.closed and counts.samples > 0
+    assert_time_ordered(path)
+    records = list(read_records(path))
+    assert len(records) == counts.records
+    readings = position_readings(records)
+    assert len(readings) >= 100
+    states = list(read_states(path))
+    assert len(states) == counts.samples
+    opening_samples = [(s["seq"], s["opening"]) for s in states if "opening" in s["changed"]]
+    assert opening_samples == readings
+    by_seq = {r.seq: r for r in records}
+    assert all(s["t"] == by_seq[s["seq"]].t for s in states)

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from analyzer.pipeline import Item
+from analyzer.model import Item
 from analyzer.sources.pacing import paced, parse_speed
 from decoders.model import CanFrame, Chunk
 

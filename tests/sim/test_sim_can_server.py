@@ -14,7 +14,10 @@ from sim_helpers import h, vectors
 
 from analyzer.sim.endpoints import CanGripperServer
 from analyzer.sim.gripper import GripperModel
-from decoders.build import can_id, can_read_request, can_write_request
+from analyzer.sources.can_message import frame_to_message
+from decoders.build import can_id, can_read_request, can_write_request, u16le
+from decoders.eg2_can import BROADCAST, OP_READ, RESERVED_BIT
+from decoders.model import CanFrame
 
 
 @pytest.fixture
@@ -29,8 +32,12 @@ def host(channel: str) -> Iterator[can.BusABC]:
     bus.shutdown()
 
 
-def send(bus: can.BusABC, arbitration_id: int, data: bytes) -> None:
-    bus.send(can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=True))
+def send(bus: can.BusABC, frame: CanFrame) -> None:
+    bus.send(frame_to_message(frame))
+
+
+def vector_frame(entry: dict[str, Any], data: str) -> CanFrame:
+    return CanFrame(None, int(entry["id"], 16), h(data))
 
 
 def answers(bus: can.BusABC, quiet: float = 0.05, first: float = 1.0) -> list[can.Message]:
@@ -63,7 +70,7 @@ def test_worked_write_frame(
     vector = next(p.values[0] for p in vectors("eg2_can"))
     if vector is None:
         pytest.skip("protocol vectors not found")
-    send(host, int(vector["id"], 16), h(vector["data"]))
+    send(host, vector_frame(vector, vector["data"]))
     msg = one(host)
     assert msg.arbitration_id == int(vector["response"]["id"], 16)
     assert msg.is_extended_id
@@ -81,15 +88,15 @@ def test_worked_read_frames(
         pytest.skip("protocol vectors not found")
     read_1120, read_1128 = entries[1], entries[2]
     # fault and state: the vector's bytes exactly (no fault, state 1)
-    data = h(read_1128["data"]) + (bytes(7) if padded else b"")
-    send(host, int(read_1128["id"], 16), data)
+    data = read_1128["data"] + (" 00" * 7 if padded else "")
+    send(host, vector_frame(read_1128, data))
     msg = one(host)
     assert msg.arbitration_id == 0x011A0001
     assert bytes(msg.data) == h(read_1128["response"]["data"])
     # force, opening, current, temperature: DLC 8, little endian (the manual's own example
     # mixes byte orders; the simulator follows the protocol's definition)
-    request = h(read_1120["alt_data_padded"]) if padded else h(read_1120["data"])
-    send(host, int(read_1120["id"], 16), request)
+    request = read_1120["alt_data_padded"] if padded else read_1120["data"]
+    send(host, vector_frame(read_1120, request))
     msg = one(host)
     assert msg.arbitration_id == 0x01180001 and msg.dlc == 8
     assert struct.unpack("<HHhH", bytes(msg.data)) == (0, 1000, -2, 35)
@@ -100,14 +107,14 @@ def test_odd_spans_and_undocumented_registers(
 ) -> None:
     server, model = gripper
     req = can_read_request(1, 1123, 1)  # the high byte of the opening (1000 = 0x03E8)
-    send(host, req.arbitration_id, req.data)
+    send(host, req)
     assert bytes(one(host).data) == b"\x03"
     req = can_read_request(1, 1026, 2)  # register 1013: undocumented, reads 0
-    send(host, req.arbitration_id, req.data)
+    send(host, req)
     assert bytes(one(host).data) == b"\x00\x00"
     # a 1-byte write at 1022 changes the low byte of the speed only: 500 = 0x01F4 -> 0x0120
     req = can_write_request(1, 1022, b"\x20")
-    send(host, req.arbitration_id, req.data)
+    send(host, req)
     assert bytes(one(host).data) == b"\x01"
     with server.lock:
         assert model.speed == 0x0120
@@ -116,11 +123,11 @@ def test_odd_spans_and_undocumented_registers(
 @pytest.mark.parametrize(
     ("address", "data"),
     [
-        (1020, struct.pack("<H", 1001)),  # target out of range
-        (1022, struct.pack("<H", 5)),  # speed below 10
-        (1122, struct.pack("<H", 5)),  # read-only
-        (1026, struct.pack("<H", 5)),  # undocumented
-        (2000, struct.pack("<H", 5)),  # outside the map
+        (1020, u16le(1001)),  # target out of range
+        (1022, u16le(5)),  # speed below 10
+        (1122, u16le(5)),  # read-only
+        (1026, u16le(5)),  # undocumented
+        (2000, u16le(5)),  # outside the map
     ],
 )
 def test_refused_writes_get_no_answer(
@@ -128,7 +135,7 @@ def test_refused_writes_get_no_answer(
 ) -> None:
     server, model = gripper
     req = can_write_request(1, address, data)
-    send(host, req.arbitration_id, req.data)
+    send(host, req)
     assert answers(host, first=0.1) == []
     with server.lock:
         assert (model.target, model.speed) == (1000, 500)
@@ -139,14 +146,14 @@ def test_broadcast_and_several_ids(channel: str, host: can.BusABC) -> None:
     with CanGripperServer(models, channel=channel) as server:
         for device in (1, 2, 1000):
             req = can_read_request(device, 1130, 2)
-            send(host, req.arbitration_id, req.data)
+            send(host, req)
             msg = one(host)
-            assert msg.arbitration_id == can_id(0, 1130, device)
+            assert msg.arbitration_id == can_id(OP_READ, 1130, device)
             assert bytes(msg.data) == b"\x01\x00"
         req = can_read_request(3, 1130, 2)  # nobody has ID 3
-        send(host, req.arbitration_id, req.data)
-        req = can_write_request(16383, 1022, struct.pack("<H", 800))  # broadcast
-        send(host, req.arbitration_id, req.data)
+        send(host, req)
+        req = can_write_request(BROADCAST, 1022, u16le(800))
+        send(host, req)
         assert answers(host, first=0.1) == []
         assert server.stats.broadcasts == 1
         with server.lock:
@@ -157,15 +164,15 @@ def test_set_id_beyond_254_and_save_pause(
     gripper: tuple[CanGripperServer, GripperModel], host: can.BusABC
 ) -> None:
     server, model = gripper
-    req = can_write_request(1, 1006, struct.pack("<H", 3000))
-    send(host, req.arbitration_id, req.data)
+    req = can_write_request(1, 1006, u16le(3000))
+    send(host, req)
     assert bytes(one(host).data) == b"\x02"  # answered under the old ID
     assert server.models.keys() == {3000}
-    req = can_write_request(3000, 1002, struct.pack("<H", 1))  # save
+    req = can_write_request(3000, 1002, u16le(1))  # save
     start = time.monotonic()
-    send(host, req.arbitration_id, req.data)
+    send(host, req)
     poll = can_read_request(3000, 1130, 2)
-    send(host, poll.arbitration_id, poll.data)  # during the pause: never answered
+    send(host, poll)  # during the pause: never answered
     msg = one(host, timeout=2.0)
     assert time.monotonic() - start > 0.8
     assert msg.arbitration_id == req.arbitration_id and bytes(msg.data) == b"\x02"
@@ -175,11 +182,11 @@ def test_set_id_beyond_254_and_save_pause(
 def test_noise(channel: str, host: can.BusABC) -> None:
     req = can_read_request(1, 1130, 2)
     with CanGripperServer([GripperModel(1)], channel=channel, drop=1.0) as server:
-        send(host, req.arbitration_id, req.data)
+        send(host, req)
         assert answers(host, first=0.1) == []
         assert server.stats.dropped == 1
     with CanGripperServer([GripperModel(1)], channel=channel, corrupt=1.0, garbage=1.0):
-        send(host, req.arbitration_id, req.data)
+        send(host, req)
         got: list[Any] = answers(host)
         kinds = [
             "error" if m.is_error_frame else "std" if not m.is_extended_id else "eg2" for m in got
@@ -194,3 +201,22 @@ def test_stop_is_quick(channel: str) -> None:
     start = time.monotonic()
     server.stop()
     assert time.monotonic() - start < 0.5
+
+
+def test_padded_write_responses(channel: str, host: can.BusABC) -> None:
+    with CanGripperServer([GripperModel(1)], channel=channel, pad_responses=True):
+        send(host, can_write_request(1, 1022, u16le(800)))
+        assert bytes(one(host).data) == b"\x02" + bytes(7)
+
+
+def test_frames_with_the_reserved_bit_are_not_for_the_gripper(
+    gripper: tuple[CanGripperServer, GripperModel], host: can.BusABC
+) -> None:
+    """A J1939 identifier with bit 28 set that reads as "write 1020 on device 1" below it."""
+    server, model = gripper
+    write = can_write_request(1, 1020, u16le(0, 500, 500))
+    send(host, CanFrame(None, write.arbitration_id | RESERVED_BIT, write.data))
+    assert answers(host, first=0.1) == []
+    with server.lock:
+        assert model.target == 1000
+    assert server.stats.ignored == 1

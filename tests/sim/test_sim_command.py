@@ -14,6 +14,7 @@ import serial
 from sim_helpers import read_exactly
 
 from decoders.build import serial_frame, u16le
+from decoders.eg2_serial import Cmd
 
 ROOT = Path(__file__).parents[2]
 # the subcommand on its own parser, so this test does not depend on the CLI's registry
@@ -70,9 +71,9 @@ def test_serial_sim_serves_the_printed_path_and_stops_on_ctrl_c(tmp_path: Path) 
         assert os.path.islink(link) and os.path.islink(f"{link}-tap")
         host = serial.Serial(str(link), 115200, timeout=1.0)
         tap = serial.Serial(f"{link}-tap", 115200, timeout=1.0)
-        request = serial_frame(2, 0xD9)
+        request = serial_frame(2, Cmd.READ_ACTPOS)
         host.write(request)
-        response = serial_frame(2, 0xD9, u16le(1000), response=True)
+        response = serial_frame(2, Cmd.READ_ACTPOS, u16le(1000), response=True)
         assert read_exactly(host, len(response)) == response
         assert read_exactly(tap, len(request) + len(response)) == request + response
         host.close()

@@ -12,17 +12,13 @@ from typing import Any
 import can
 import pytest
 
-from analyzer.sim.endpoints import (
-    CanGripperServer,
-    ModbusGripperServer,
-    SerialGripperServer,
-    to_can_frame,
-)
+from analyzer.sim.endpoints import CanGripperServer, ModbusGripperServer, SerialGripperServer
 from analyzer.sim.gripper import GripperModel
 from analyzer.sim.host import HostQuirks, HostResult, run_host_cycle
 from analyzer.sim.ptybus import PtyBus
+from analyzer.sources.can_message import message_to_frame
 from decoders.eg2_can import Eg2CanDecoder
-from decoders.eg2_serial import Eg2SerialDecoder
+from decoders.eg2_serial import Cmd, Eg2SerialDecoder
 from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import GARBAGE, REQUEST, RESPONSE, Chunk, Record
 
@@ -77,7 +73,8 @@ def test_serial_pick_and_place(tapped_line: tuple[PtyBus, Tap], continuous: bool
     assert result.found == [1, 2]
     records = _decoded(Eg2SerialDecoder(), tap.data)
     assert all(r.ok for r in records), [r for r in records if not r.ok][:3]
-    assert {r.code for r in records} >= {0x41, 0x11, 0x18 if continuous else 0x10}
+    catch = Cmd.MOVE_CATCH2_XG if continuous else Cmd.MOVE_CATCH_XG
+    assert {r.code for r in records} >= {Cmd.READ_EG_RUNSTATE, Cmd.MOVE_RELEASE, catch}
     held = [r for r in records if r.direction == RESPONSE and r.fields.get("state") == 6]
     assert {r.device for r in held} == {1, 2}
     # the ID scan probed 3 and got nothing back: more requests than responses
@@ -115,7 +112,7 @@ def test_can_pick_and_place() -> None:
         dec = Eg2CanDecoder()
         records: list[Record] = []
         while (msg := tap.recv(0)) is not None:
-            records.append(dec.decode(to_can_frame(msg), len(records)))
+            records.append(dec.decode(message_to_frame(msg), len(records)))
     finally:
         tap.shutdown()
     assert records and all(r.ok for r in records)
@@ -152,8 +149,10 @@ def test_save_quirk_waits_over_a_second(tapped_line: tuple[PtyBus, Tap]) -> None
     assert result.timeouts == 0
     assert time.monotonic() - start > 0.85 + 1.0
     records = _decoded(Eg2SerialDecoder(), tap.data)
-    save = next(i for i, r in enumerate(records) if r.code == 0x01 and r.direction == REQUEST)
-    assert records[save + 1].code == 0x01 and records[save + 1].direction == RESPONSE
+    save = next(
+        i for i, r in enumerate(records) if r.code == Cmd.PARA_SAVE and r.direction == REQUEST
+    )
+    assert records[save + 1].code == Cmd.PARA_SAVE and records[save + 1].direction == RESPONSE
 
 
 def test_stop_event_ends_an_endless_run(tapped_line: tuple[PtyBus, Tap]) -> None:

@@ -4,6 +4,7 @@ here wrote) and by the manual's worked frames."""
 from __future__ import annotations
 
 import logging
+import struct
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -16,7 +17,13 @@ from sim_helpers import h, read_exactly, read_quiet, vectors
 from analyzer.sim.endpoints import ModbusGripperServer
 from analyzer.sim.gripper import GripperModel
 from analyzer.sim.ptybus import PtyBus
-from decoders.build import modbus_exception, modbus_read_request, with_crc
+from decoders.build import (
+    modbus_exception,
+    modbus_read_request,
+    modbus_read_response,
+    modbus_write_single,
+    with_crc,
+)
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # it logs every exception response
 
@@ -159,7 +166,7 @@ def test_worked_frames_byte_identical(line: PtyBus, host_port: serial.Serial) ->
 def test_the_manuals_swapped_crc_is_ignored_unless_asked(
     line: PtyBus, host_port: serial.Serial
 ) -> None:
-    swapped = with_crc(bytes.fromhex("01 06 03 F2 00 00"), swapped=True)
+    swapped = with_crc(modbus_write_single(1, 1010, 0)[:-2], swapped=True)  # as the manual prints
     with ModbusGripperServer(line.path("gripper"), [GripperModel(1)]) as server:
         host_port.write(swapped)
         assert read_quiet(host_port, 0.1) == b""
@@ -172,7 +179,7 @@ def test_the_manuals_swapped_crc_is_ignored_unless_asked(
 def test_save_pause_over_the_wire(line: PtyBus, host_port: serial.Serial) -> None:
     model = GripperModel(1)
     with ModbusGripperServer(line.path("gripper"), [model]):
-        save = with_crc(bytes.fromhex("01 06 03 E9 00 01"))  # 1001 = 1
+        save = modbus_write_single(1, 1001, 1)
         start = time.monotonic()
         host_port.write(save)
         time.sleep(0.05)
@@ -182,6 +189,7 @@ def test_save_pause_over_the_wire(line: PtyBus, host_port: serial.Serial) -> Non
         assert read_quiet(host_port, 0.05) == b""
         assert model.saves == 1
         host_port.write(modbus_read_request(1, 1003, 1))
-        assert read_exactly(host_port, 7) == with_crc(bytes.fromhex("01 03 02 00 01"))
-        host_port.write(with_crc(bytes.fromhex("01 04 04 25 00 01")))  # read input registers
+        assert read_exactly(host_port, 7) == modbus_read_response(1, [1])  # ID 1
+        read_input_registers = with_crc(struct.pack(">BBHH", 1, 4, 1061, 1))  # not the gripper's
+        host_port.write(read_input_registers)
         assert read_exactly(host_port, 5) == modbus_exception(1, 4, 1)

@@ -13,6 +13,8 @@ import serial
 from sim_helpers import read_exactly, read_quiet
 
 from analyzer.sim.ptybus import PtyBus
+from decoders.build import modbus_read_request, serial_frame
+from decoders.eg2_serial import Cmd
 
 
 def _reader(port: serial.Serial, n: int, out: list[bytes]) -> threading.Thread:
@@ -40,9 +42,10 @@ def test_bytes_reach_every_other_drop_unchanged_and_not_the_writer() -> None:
             assert got_c == [data]
             assert read_quiet(ports["a"], 0.05) == b""  # no echo to the writer
             # and the other way round, from another drop
-            ports["c"].write(b"\x01\x03\x04\x25\x00\x04\x54\xf2")
-            assert read_exactly(ports["a"], 8) == b"\x01\x03\x04\x25\x00\x04\x54\xf2"
-            assert read_exactly(ports["b"], 8) == b"\x01\x03\x04\x25\x00\x04\x54\xf2"
+            request = modbus_read_request(1, 1061, 4)
+            ports["c"].write(request)
+            assert read_exactly(ports["a"], 8) == request
+            assert read_exactly(ports["b"], 8) == request
             assert read_quiet(ports["c"], 0.05) == b""
         finally:
             for p in ports.values():
@@ -74,13 +77,14 @@ def test_on_bytes_sees_every_chunk_with_its_writer() -> None:
     with PtyBus(["host", "gripper"], on_bytes=lambda n, d, t: seen.append((n, d))) as bus:
         host = serial.Serial(bus.path("host"), 115200)
         gripper = serial.Serial(bus.path("gripper"), 115200)
-        host.write(b"\xeb\x90\x01\x01\x41\x43")
-        assert read_exactly(gripper, 6) == b"\xeb\x90\x01\x01\x41\x43"
+        request = serial_frame(1, Cmd.READ_EG_RUNSTATE)
+        host.write(request)
+        assert read_exactly(gripper, 6) == request
         bus.send("gripper", b"\xee\x16")  # injected as if the gripper had sent it
         assert read_exactly(host, 2) == b"\xee\x16"
         host.close()
         gripper.close()
-    assert b"".join(d for n, d in seen if n == "host") == b"\xeb\x90\x01\x01\x41\x43"
+    assert b"".join(d for n, d in seen if n == "host") == request
     assert b"".join(d for n, d in seen if n == "gripper") == b"\xee\x16"
 
 

@@ -16,8 +16,15 @@ from analyzer.sim.endpoints import SerialGripperServer
 from analyzer.sim.gripper import FAULT_STALL, SAVE_PAUSE_S, GripperModel
 from analyzer.sim.ptybus import PtyBus
 from decoders.build import serial_frame, u16le
-from decoders.eg2_serial import Eg2SerialDecoder
+from decoders.eg2_serial import BROADCAST, STATUS_FAILED, STATUS_OK, Cmd, Eg2SerialDecoder
 from decoders.model import Chunk
+
+OK, FAILED = bytes((STATUS_OK,)), bytes((STATUS_FAILED,))
+
+
+def _bad_sum(frame: bytes) -> bytes:
+    """frame with its checksum byte damaged."""
+    return frame[:-1] + bytes((frame[-1] ^ 0x01,))
 
 
 def _position_497(m: GripperModel, now: float) -> None:
@@ -77,16 +84,18 @@ def test_requests_change_the_model(
 ) -> None:
     server, model = served
     server.place_object(1, 400)
-    host_port.write(h("EB 90 01 05 10 F4 01 64 00 6F"))  # catch, 500, 100 g
-    assert read_exactly(host_port, 7) == h("EE 16 01 02 10 01 14")
+    host_port.write(serial_frame(1, Cmd.MOVE_CATCH_XG, u16le(500, 100)))  # catch, 500, 100 g
+    assert read_exactly(host_port, 7) == serial_frame(1, Cmd.MOVE_CATCH_XG, OK, response=True)
     deadline = time.monotonic() + 3.0
     while server.snapshot(1)["state"] != 6 and time.monotonic() < deadline:
         time.sleep(0.02)
     snap = server.snapshot(1)
     assert (snap["state"], snap["position"], snap["measured_force"]) == (6, 400, 100)
     # the run state now says so
-    host_port.write(h("EB 90 01 01 41 43"))
-    want = serial_frame(1, 0x41, bytes((6, 0, model.temperature_c)) + u16le(400, 100), True)
+    host_port.write(serial_frame(1, Cmd.READ_EG_RUNSTATE))
+    want = serial_frame(
+        1, Cmd.READ_EG_RUNSTATE, bytes((6, 0, model.temperature_c)) + u16le(400, 100), True
+    )
     assert read_exactly(host_port, len(want)) == want
 
 
@@ -95,17 +104,17 @@ def test_bad_values_get_failure_status(
 ) -> None:
     _, model = served
     cases = [
-        (0x12, u16le(100, 200)),  # max < min
-        (0x12, u16le(1001, 0)),  # out of 0-1000
-        (0x10, u16le(5000, 100)),  # speed 5000, as one client sends
-        (0x11, u16le(0)),
-        (0x04, bytes((0,))),  # ID 0
-        (0x11, b""),  # no speed at all
+        (Cmd.SET_EG_PARA, u16le(100, 200)),  # max < min
+        (Cmd.SET_EG_PARA, u16le(1001, 0)),  # out of 0-1000
+        (Cmd.MOVE_CATCH_XG, u16le(5000, 100)),  # speed 5000, as one client sends
+        (Cmd.MOVE_RELEASE, u16le(0)),
+        (Cmd.PARA_ID_SET, bytes((0,))),  # ID 0
+        (Cmd.MOVE_RELEASE, b""),  # no speed at all
     ]
     for cmd, data in cases:
         host_port.write(serial_frame(1, cmd, data))
-        want = serial_frame(1, cmd, b"\x55", response=True)
-        assert read_exactly(host_port, len(want)) == want, f"CMD 0x{cmd:02X} {data.hex()}"
+        want = serial_frame(1, cmd, FAILED, response=True)
+        assert read_exactly(host_port, len(want)) == want, f"{cmd!r} {data.hex()}"
     assert (model.max_opening, model.min_opening, model.device_id) == (1000, 0, 1)
 
 
@@ -113,8 +122,8 @@ def test_two_byte_set_id_is_accepted(
     served: tuple[SerialGripperServer, GripperModel], host_port: serial.Serial
 ) -> None:
     _, model = served
-    host_port.write(serial_frame(1, 0x04, u16le(7)))  # the LEN 3 form of section 4
-    assert read_exactly(host_port, 7) == serial_frame(1, 0x04, b"\x01", response=True)
+    host_port.write(serial_frame(1, Cmd.PARA_ID_SET, u16le(7)))  # the LEN 3 form of section 4
+    assert read_exactly(host_port, 7) == serial_frame(1, Cmd.PARA_ID_SET, OK, response=True)
     assert model.device_id == 7
 
 
@@ -123,13 +132,15 @@ def test_faults_show_and_clear(
 ) -> None:
     server, _ = served
     server.inject_fault(1, "stall")
-    host_port.write(h("EB 90 01 01 41 43"))
+    host_port.write(serial_frame(1, Cmd.READ_EG_RUNSTATE))
     rec = _response(host_port)
     assert rec.fields["fault"] == FAULT_STALL
-    host_port.write(h("EB 90 01 05 10 F4 01 64 00 6F"))  # a faulted gripper refuses to move
-    assert read_exactly(host_port, 7) == serial_frame(1, 0x10, b"\x55", response=True)
-    host_port.write(h("EB 90 01 01 17 19"))
-    assert read_exactly(host_port, 7) == h("EE 16 01 02 17 01 1B")
+    host_port.write(
+        serial_frame(1, Cmd.MOVE_CATCH_XG, u16le(500, 100))
+    )  # a faulted gripper refuses to move
+    assert read_exactly(host_port, 7) == serial_frame(1, Cmd.MOVE_CATCH_XG, FAILED, response=True)
+    host_port.write(serial_frame(1, Cmd.ERROR_CLR))
+    assert read_exactly(host_port, 7) == serial_frame(1, Cmd.ERROR_CLR, OK, response=True)
     assert server.snapshot(1)["fault"] == 0
 
 
@@ -150,12 +161,12 @@ def test_several_grippers_one_line_broadcast_and_bad_checksum(
     models = {i: GripperModel(i) for i in (1, 2, 3)}
     with SerialGripperServer(line.path("gripper"), models) as server:
         for i in (1, 2, 3):
-            host_port.write(serial_frame(i, 0xD9))
-            assert read_exactly(host_port, 8) == serial_frame(i, 0xD9, u16le(1000), True)
-        host_port.write(serial_frame(4, 0xD9))  # nobody has ID 4
-        host_port.write(h("EB 90 01 01 41 44"))  # bad checksum: ignored
+            host_port.write(serial_frame(i, Cmd.READ_ACTPOS))
+            assert read_exactly(host_port, 8) == serial_frame(i, Cmd.READ_ACTPOS, u16le(1000), True)
+        host_port.write(serial_frame(4, Cmd.READ_ACTPOS))  # nobody has ID 4
+        host_port.write(_bad_sum(serial_frame(1, Cmd.READ_EG_RUNSTATE)))  # bad checksum: ignored
         # broadcast: every gripper closes, none answers
-        host_port.write(serial_frame(255, 0x10, u16le(1000, 100)))
+        host_port.write(serial_frame(BROADCAST, Cmd.MOVE_CATCH_XG, u16le(1000, 100)))
         assert read_quiet(host_port, 0.1) == b""
         for i in (1, 2, 3):
             assert server.snapshot(i)["state"] in (2, 4)
@@ -166,18 +177,22 @@ def test_several_grippers_one_line_broadcast_and_bad_checksum(
 def test_the_gripper_is_deaf_during_a_save(line: PtyBus, host_port: serial.Serial) -> None:
     models = {1: GripperModel(1), 2: GripperModel(2)}
     with SerialGripperServer(line.path("gripper"), models):
-        host_port.write(serial_frame(1, 0x01))
+        host_port.write(serial_frame(1, Cmd.PARA_SAVE))
         time.sleep(0.05)
-        host_port.write(serial_frame(1, 0xD9))  # during the pause: no answer, ever
-        host_port.write(serial_frame(2, 0xD9))  # the other gripper answers at once
-        assert read_exactly(host_port, 8, timeout=0.5) == serial_frame(2, 0xD9, u16le(1000), True)
-        assert read_exactly(host_port, 7, timeout=2.0) == h("EE 16 01 02 01 01 05")
+        host_port.write(serial_frame(1, Cmd.READ_ACTPOS))  # during the pause: no answer, ever
+        host_port.write(serial_frame(2, Cmd.READ_ACTPOS))  # the other gripper answers at once
+        assert read_exactly(host_port, 8, timeout=0.5) == serial_frame(
+            2, Cmd.READ_ACTPOS, u16le(1000), True
+        )
+        assert read_exactly(host_port, 7, timeout=2.0) == serial_frame(
+            1, Cmd.PARA_SAVE, OK, response=True
+        )
         assert read_quiet(host_port, 0.05) == b""
 
 
 def test_noise_knobs(line: PtyBus, host_port: serial.Serial) -> None:
-    request = h("EB 90 01 01 D9 DB")
-    good = serial_frame(1, 0xD9, u16le(1000), True)
+    request = serial_frame(1, Cmd.READ_ACTPOS)
+    good = serial_frame(1, Cmd.READ_ACTPOS, u16le(1000), True)
     with SerialGripperServer(line.path("gripper"), [GripperModel(1)], corrupt=1.0) as server:
         host_port.write(request)
         bad = read_exactly(host_port, len(good))
@@ -206,8 +221,8 @@ def test_the_server_comes_back_after_its_adapter_is_replugged(tmp_path: Path) ->
     with PtyBus(link_dir=str(tmp_path)) as bus:
         bus.add_endpoint("gripper")
         host = serial.Serial(bus.add_endpoint("host"), 115200, timeout=1.0)
-        request = serial_frame(1, 0xD9)
-        response = serial_frame(1, 0xD9, u16le(1000), response=True)
+        request = serial_frame(1, Cmd.READ_ACTPOS)
+        response = serial_frame(1, Cmd.READ_ACTPOS, u16le(1000), response=True)
         with SerialGripperServer(str(tmp_path / "gripper"), [GripperModel(1)]) as server:
             host.write(request)
             assert read_exactly(host, len(response)) == response

@@ -5,8 +5,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from analyzer.pipeline import Item
-from analyzer.sources.live import SourceEvent, TapQueue
+from analyzer.model import Item, SourceEvent
+from analyzer.sources.live import TapQueue
 
 
 class Collector:

@@ -14,8 +14,9 @@ import pytest
 from can.interfaces.virtual import VirtualBus
 from tap_helpers import Collector as BaseCollector
 
+from analyzer.model import ERROR, INFO, WARNING
 from analyzer.sources.can_tap import CanTap, listen_only_plan, parse_ip_link_details
-from analyzer.sources.live import ERROR, INFO, WARNING, TapQueue
+from analyzer.sources.live import TapQueue
 from decoders.model import CanFrame
 
 RETRY = 0.05
@@ -136,7 +137,7 @@ def test_open_fails_then_retries(
         assert err.level == ERROR
         assert err.message == (
             f"cannot open virtual channel {ch}: CanInitializationError: no such adapter; "
-            "retrying every 0.05 s"
+            "retrying with back-off from 0.05 s up to 5 s"
         )
         ok = c.wait_event("open", 2)
         assert ok.level == INFO and "retries" in ok.message

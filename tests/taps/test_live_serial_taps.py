@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from tap_helpers import Collector as BaseCollector
 
-from analyzer.pipeline import Item
-from analyzer.sources.live import ERROR, INFO, WARNING, TapQueue
+from analyzer.model import ERROR, INFO, WARNING, Item
+from analyzer.sources.live import TapQueue
 from analyzer.sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
 from decoders.model import Chunk
 
@@ -265,7 +265,8 @@ def test_port_missing_at_start_then_appears(
         err = c.wait_event("open")
         assert err.level == ERROR
         assert err.message == (
-            f"cannot open {path}: [Errno 2] No such file or directory; retrying every 0.05 s"
+            f"cannot open {path}: [Errno 2] No such file or directory; "
+            "retrying with back-off from 0.05 s up to 5 s"
         )
         time.sleep(4 * RETRY)
         c.pump()

@@ -1,0 +1,193 @@
+"""``eg2scope plot``: force, opening, current, temperature and state of every gripper on one
+clock in Rerun, from a capture, a recording or a live bus (docs/rerun.md)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from ..errors import EXIT_INTERRUPTED, UsageError
+from ..rerun_target import (
+    SERVE_WEB,
+    SPAWN,
+    RerunTarget,
+    connect_target,
+    default_target,
+    save_target,
+)
+from .common import (
+    CaptureOptions,
+    finish_capture,
+    open_reader,
+    protocol_type,
+    run_capture,
+    speed_type,
+)
+from .demo import add_demo_arguments
+from .livesource import CAN_KEYS, add_source_arguments, open_taps
+from .session import add_session_arguments, run_session
+
+
+def add_subparser(sub: Any) -> None:
+    parser = sub.add_parser(
+        "plot",
+        help="plot force, opening, state and errors of every gripper in Rerun",
+        description=(
+            "Plot what each gripper's opening, force, current, temperature and state did, and "
+            "the controller's commands and the bus's errors, on one clock in Rerun: from any "
+            "capture 'decode' reads or an eg2scope .mcap recording, or live from a bus. Every "
+            "reading is plotted (nothing is downsampled), on the timelines capture_time and "
+            "frame (the record's seq, as the TUI and the recording number it). By default the "
+            "Rerun viewer is spawned when a display can be opened; otherwise <capture>.rrd is "
+            "written in the current directory and the command that opens it is printed."
+        ),
+        epilog=(
+            "examples:\n"
+            "  eg2scope plot captures/can_pick_place.log\n"
+            "  eg2scope plot run.mcap --save run.rrd        # then: rerun run.rrd\n"
+            "  eg2scope plot --demo                         # simulated grippers, live\n"
+            "  eg2scope plot -i socketcan -c can0 --serve-web"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "file",
+        nargs="?",
+        help="capture to plot: candump -L .log (also .log.gz), python-can "
+        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
+        "serial bytes (or give a live source or --demo instead)",
+    )
+    target = parser.add_argument_group(
+        "where the plot goes (default: spawn a viewer, or "
+        "write <capture>.rrd here when there is no display)"
+    )
+    where = target.add_mutually_exclusive_group()
+    where.add_argument("--save", metavar="FILE.rrd", help="write a Rerun recording file")
+    where.add_argument("--spawn", action="store_true", help="spawn the Rerun viewer")
+    where.add_argument(
+        "--connect",
+        nargs="?",
+        const="",
+        metavar="URL",
+        help="send to a running viewer (default rerun+http://127.0.0.1:9876/proxy)",
+    )
+    where.add_argument(
+        "--serve-web",
+        action="store_true",
+        help="serve Rerun's web viewer on 127.0.0.1 (this machine only) until Ctrl-C",
+    )
+    capture = parser.add_argument_group("capture replay")
+    capture.add_argument(
+        "--speed",
+        type=speed_type,
+        default=None,
+        metavar="X",
+        help="replay with the capture's own timing sped up X times (1 = real time) or 'max' "
+        "(default: all at once)",
+    )
+    capture.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    add_source_arguments(parser)
+    parser.add_argument(
+        "--demo",
+        action="store_true",
+        help="plot the built-in demo live (simulated grippers on all three buses)",
+    )
+    add_demo_arguments(parser)
+    add_session_arguments(parser, record_required=False)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    live = args.demo or live_source_given(args)
+    if args.file and live:
+        raise UsageError("give a capture file or a live source (or --demo), not both")
+    if not args.file and not live:
+        raise UsageError(
+            "nothing to plot: give a capture file, a live source (-i/-c, "
+            "--serial PORT) or --demo (see --help)"
+        )
+    if args.file:
+        return plot_capture(args)
+    return plot_live(args)
+
+
+def live_source_given(args: argparse.Namespace) -> bool:
+    can_given = any(key in args for key in CAN_KEYS) or bool(getattr(args, "bus_kwargs", None))
+    return can_given or bool(args.serial) or bool(getattr(args, "bridge", None))
+
+
+def chosen_target(args: argparse.Namespace, source: str | None) -> RerunTarget:
+    """The target the options name, or the default for ``source`` (None: a live session)."""
+    if args.save:
+        if source is not None and args.save == source:
+            raise UsageError(f"--save {args.save} would overwrite the capture being plotted")
+        return save_target(args.save)
+    if args.spawn:
+        return RerunTarget(SPAWN)
+    if args.connect is not None:
+        return connect_target(args.connect or None)
+    if args.serve_web:
+        return RerunTarget(SERVE_WEB)
+    return default_target(source)
+
+
+def plot_capture(args: argparse.Namespace) -> int:
+    from ..sinks.rerun import LIVE_FLUSH_S, RerunListener
+
+    if args.output:
+        raise UsageError("-o records a live source; a capture is plotted as it is")
+    try:
+        protocol = protocol_type(args.protocol or "auto")
+    except argparse.ArgumentTypeError as exc:
+        raise UsageError(str(exc)) from None
+    opts = CaptureOptions(
+        path=args.file,
+        protocol=protocol,
+        bus=args.bus,
+        speed=args.speed,
+        progress=not args.no_progress,
+    )
+    target = chosen_target(args, args.file)
+    reader = open_reader(opts)  # a capture that cannot be read fails before a viewer opens
+    try:
+        # a paced replay is watched as it goes: update the viewer as often as live
+        flush = LIVE_FLUSH_S if args.speed is not None else None
+        listener = RerunListener(target, flush_interval=flush)
+    except BaseException:
+        reader.close()
+        raise
+    session, reader = run_capture(opts, [listener], reader)
+    code = finish_capture(args.file, session, reader)
+    for _, failure in session.detached:
+        print(f"eg2scope: error: the Rerun output failed: {failure}", file=sys.stderr)
+    if code != EXIT_INTERRUPTED:
+        listener.output.hold()
+    listener.output.stop_server()
+    return code
+
+
+def plot_live(args: argparse.Namespace) -> int:
+    from ..sinks.rerun import RerunListener
+
+    if args.demo:
+        return _plot_demo(args)
+    taps = open_taps(args)  # usage errors before a viewer opens
+    listener = RerunListener(chosen_target(args, args.output), live=True)
+    return _finish_live(listener, run_session(args, taps, show=None, extra=[listener]))
+
+
+def _plot_demo(args: argparse.Namespace) -> int:
+    from ..sinks.rerun import RerunListener
+    from .demo import run_demo
+
+    listener = RerunListener(chosen_target(args, args.output), live=True)
+    return _finish_live(listener, run_demo(args, show=None, extra=[listener]))
+
+
+def _finish_live(listener: Any, code: int) -> int:
+    """A served web viewer stays up after a session that ran its course (--duration)."""
+    if code != EXIT_INTERRUPTED:
+        listener.output.hold()
+    listener.output.stop_server()
+    return code

@@ -1,0 +1,90 @@
+"""The listener contract: what a session tells the parts that show, record or count its data.
+
+As python-can's ``Listener``, grown for a decoder: a session calls each listener with batches of
+decoded records, state samples, source events and the raw input they came from, in stream order,
+plus a periodic ``tick`` and a final ``close``. Every method has a no-op default, so a listener
+implements only what it uses. The session guards each call: a listener that raises is told
+through ``on_error``, reported once as an event and detached; the session and the other
+listeners (a recording among them) go on.
+
+Listeners are found by name in ``LISTENERS`` (as python-can finds interfaces in ``BACKENDS``):
+the module is imported only when the listener is made.
+"""
+
+from __future__ import annotations
+
+import importlib
+from abc import ABC, abstractmethod
+from typing import Any
+
+from decoders.model import Record
+
+from .model import Item, SourceEvent, StateSample
+
+
+class Listener(ABC):
+    """Base of everything a session feeds: ``on_records`` is required (as python-can's
+    ``on_message_received``), every other hook is optional."""
+
+    #: the session builds state samples only when some listener reads them
+    wants_states: bool = False
+    #: the session keeps raw input only when some listener reads it
+    wants_raw: bool = False
+
+    @abstractmethod
+    def on_records(self, records: list[Record]) -> None:
+        """Decoded records, in stream order."""
+
+    def on_states(self, samples: list[StateSample]) -> None:
+        """State samples (one per record that set a gripper's state), in stream order."""
+
+    def on_event(self, event: SourceEvent) -> None:
+        """A source event (opened, lost, reopened, drops, passive, ...), in time order with the
+        records around it."""
+
+    def on_raw(self, items: list[Item]) -> None:
+        """The raw input of the records that follow: byte chunks and CAN frames."""
+
+    def tick(self, now: float) -> None:
+        """Called after every batch and when idle (``now``: wall-clock seconds), for flushing
+        and redraws."""
+
+    def close(self) -> None:
+        """The session is over: flush and release. Called once."""
+
+    def on_error(self, exc: BaseException) -> None:
+        """This listener raised ``exc`` and has been detached from the session."""
+
+
+# name -> "module:Class", imported on first use
+LISTENERS: dict[str, str] = {
+    "text": "analyzer.sinks.text:TextListener",
+    "jsonl": "analyzer.sinks.jsonl:JsonlListener",
+    "csv": "analyzer.sinks.csv:CsvListener",
+    "stats": "analyzer.sinks.stats:StatsListener",
+    "mcap": "analyzer.recording:McapRecorder",
+    "rerun": "analyzer.sinks.rerun:RerunListener",
+}
+
+
+def listener_class(name: str) -> type[Listener]:
+    """The listener class registered under ``name``; ValueError lists the names."""
+    try:
+        target = LISTENERS[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown output {name!r}; choose one of: {', '.join(sorted(LISTENERS))}"
+        ) from None
+    module, _, cls = target.partition(":")
+    found: type[Listener] = getattr(importlib.import_module(module), cls)
+    return found
+
+
+def make_listener(name: str, *args: Any, **kwargs: Any) -> Listener:
+    """A new listener of the kind registered under ``name``."""
+    return listener_class(name)(*args, **kwargs)
+
+
+def register_listener(name: str, target: str) -> None:
+    """Make ``"module:Class"`` available as ``name`` (a plug-in's own output)."""
+    LISTENERS[name] = target

@@ -1,0 +1,105 @@
+"""What flows between the session's parts: source input (Item), source events, state samples.
+
+Decoded records (``decoders.model.Record``) are the decoders' own; everything here is what the
+application adds around them. Plain data, no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Final
+
+from decoders.model import CanFrame, Chunk
+from decoders.registers import fault_text, opening_mm, state_text
+
+# foxglove.Log levels, used for source events
+DEBUG: Final = 1
+INFO: Final = 2
+WARNING: Final = 3
+ERROR: Final = 4
+LEVEL_NAMES: Final = {DEBUG: "debug", INFO: "info", WARNING: "warning", ERROR: "error"}
+
+EVENT: Final = "event"  # the JSONL ``kind`` of a source event
+
+
+@dataclass(slots=True)
+class Item:
+    """One unit of source input: a chunk of one byte stream, or one CAN frame.
+
+    ``stream`` separates byte streams on one bus that must be framed apart (the two wires of
+    an RS232 line tapped with two adapters); records still carry ``bus``, so pairing joins them.
+    """
+
+    bus: str
+    payload: Chunk | CanFrame
+    stream: str = ""
+
+
+@dataclass(slots=True)
+class SourceEvent:
+    """Something that happened to a source rather than on the bus: a port opened, lost or
+    reopened, drops, whether a tap is passive. ``count`` > 1: the same event repeated (a
+    flapping adapter), collapsed into one."""
+
+    t: float
+    bus: str
+    level: int
+    message: str
+    kind: str = "info"  # "open", "passive", "lost", "reopened", "drops", "closed", "info", ...
+    count: int = 1
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSONL form: a record of its own ``kind`` ("event"), in time order with frames."""
+        return {
+            "t": self.t,
+            "bus": self.bus,
+            "kind": EVENT,
+            "event": self.kind,
+            "level": LEVEL_NAMES.get(self.level, "info"),
+            "message": self.message,
+            "count": self.count,
+        }
+
+
+@dataclass(slots=True)
+class StateSample:
+    """One reading or setting of one gripper: what a record changed, at the record's time.
+
+    ``changed`` holds the state fields this record set (a reading that repeats the last value
+    is still a reading: plots get every sample). ``values`` is the gripper's whole state after
+    this record (a snapshot: later records do not change it). ``seq`` is the record's.
+    """
+
+    t: float | None
+    bus: str
+    device: int
+    protocol: str
+    seq: int
+    changed: dict[str, Any]
+    values: dict[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The whole state, flat (MCAP ``/state/<bus>/<device>``), with ``changed`` naming the
+        fields this sample set. Hand-written: this runs once per reading."""
+        d: dict[str, Any] = {
+            "t": self.t,
+            "bus": self.bus,
+            "device": self.device,
+            "protocol": self.protocol,
+            "seq": self.seq,
+        }
+        d.update(self.values)
+        derived(d)
+        d["changed"] = list(self.changed)
+        return d
+
+
+def derived(d: dict[str, Any]) -> dict[str, Any]:
+    """Add the fields a person reads to a state's values: millimetres and words."""
+    opening, target = d.get("opening"), d.get("target_opening")
+    state, fault = d.get("state"), d.get("fault")
+    d["opening_mm"] = None if opening is None else opening_mm(opening)
+    d["target_mm"] = None if target is None else opening_mm(target)
+    d["state_text"] = None if state is None else state_text(state)
+    d["fault_text"] = [] if fault is None else fault_text(fault)
+    return d

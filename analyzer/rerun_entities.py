@@ -1,0 +1,142 @@
+"""The Rerun entity contract (docs/rerun.md): entity paths, timelines, series names and colours,
+the state lanes' configuration. The listener (``analyzer/sinks/rerun.py``) logs these entities and
+the blueprint (``analyzer/rerun_blueprint.py``) lays them out; both read them from here only.
+
+```
+/<bus>/<device>/opening_mm/measured   /opening_mm/target       scalars (mm)
+/<bus>/<device>/force/measured        /force/limit             scalars; /force/faults: red marks
+/<bus>/<device>/current               /temperature_c           scalars
+/<bus>/<device>/state                 /fault                   state lanes
+/<bus>/<device>/commands                                       text log
+/<bus>/errors                                                  text log, levels from the flags
+/<bus>/health/frames_per_s  errors_per_s  unanswered_per_s  latency_ms
+```
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+import rerun as rr
+
+from decoders.registers import STATE_TEXT, fault_text, opening_mm
+
+CAPTURE_TIME: Final = "capture_time"  # the records' own timestamps
+FRAME: Final = "frame"  # the record's seq: the same number the TUI and the MCAP recording show
+
+COMMANDS: Final = "commands"
+ERRORS: Final = "errors"
+HEALTH: Final = "health"
+FAULT_MARKS: Final = "force/faults"
+STATE: Final = "state"
+FAULT: Final = "fault"
+SESSION: Final = "session"  # where events that belong to no bus go (drops, a failed output)
+
+FAULT_MARK_COLOR: Final = 0xE3000BFF
+
+
+def bus_path(bus: str) -> str:
+    """``/<bus>``: a bus name as one entity path part (``/dev/ttyUSB0`` stays one part)."""
+    return "/" + rr.escape_entity_path_part(bus)
+
+
+def gripper_path(bus: str, device: int) -> str:
+    return f"{bus_path(bus)}/{device}"
+
+
+_MM: Final = np.array([opening_mm(v) for v in range(1001)])
+
+
+def opening_mm_column(openings: np.ndarray) -> np.ndarray:
+    """``opening_mm`` of a column of openings (0-1000 by table; anything else one by one)."""
+    whole = openings.astype(np.int64)
+    if len(whole) and (whole == openings).all() and whole.min() >= 0 and whole.max() <= 1000:
+        return np.asarray(_MM[whole])
+    return np.array([opening_mm(v) for v in openings.tolist()], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Series:
+    """One plotted quantity: which state field feeds it, where it goes, how it looks."""
+
+    field: str  # the StateSample field
+    entity: str  # under /<bus>/<device>/
+    name: str  # the legend
+    color: int  # 0xRRGGBBAA
+    convert: Callable[[np.ndarray], np.ndarray] | None = None  # readings -> plotted values
+    step: bool = False  # a setting holds until the next one: drawn as steps
+
+
+SERIES: Final = (
+    Series("opening", "opening_mm/measured", "opening (mm)", 0x1F77B4FF, opening_mm_column),
+    Series(
+        "target_opening", "opening_mm/target", "target (mm)", 0x9EC9E8FF, opening_mm_column, True
+    ),
+    Series("force", "force/measured", "force", 0xFF7F0EFF),
+    Series("force_setting", "force/limit", "force limit", 0x8C8C8CFF, step=True),
+    Series("current", "current", "current", 0x2CA02CFF),
+    Series("temperature_c", "temperature_c", "temperature (°C)", 0x9467BDFF),
+)
+SERIES_BY_FIELD: Final = {s.field: s for s in SERIES}
+
+# the state lanes: field -> entity
+LANES: Final = {"state": STATE, "fault": FAULT}
+
+# per-bus health: entity under /<bus>/health/ -> (legend, colour)
+HEALTH_SERIES: Final = {
+    "frames_per_s": ("frames/s", 0x1F77B4FF),
+    "errors_per_s": ("errors/s", 0xE3000BFF),
+    "unanswered_per_s": ("unanswered/s", 0xFF7F0EFF),
+    "latency_ms": ("latency (ms)", 0x2CA02CFF),
+}
+
+# the manual's run states (1-6), coloured by what they mean for a grip
+STATE_COLORS: Final = {
+    1: 0x9EC9E8FF,  # fully open, idle
+    2: 0x1F77B4FF,  # fully closed, idle
+    3: 0xBCBD22FF,  # stopped, idle
+    4: 0xFF7F0EFF,  # closing
+    5: 0x17BECFFF,  # opening
+    6: 0x2CA02CFF,  # stopped by the force limit: holding a part
+}
+FAULT_VALUES: Final = range(32)  # the five documented fault bits, every combination
+NO_FAULT_COLOR: Final = 0x2CA02CFF
+
+
+def state_configuration() -> rr.StateConfiguration:
+    """The run state lane: the manual's states by name and colour (values are the numbers)."""
+    return rr.StateConfiguration(
+        values=[str(n) for n in STATE_TEXT],
+        labels=list(STATE_TEXT.values()),
+        colors=[STATE_COLORS[n] for n in STATE_TEXT],
+    )
+
+
+def fault_configuration() -> rr.StateConfiguration:
+    """The fault lane: every combination of the documented fault bits, named; any fault red."""
+    return rr.StateConfiguration(
+        values=[str(v) for v in FAULT_VALUES],
+        labels=[", ".join(fault_text(v)) or "no fault" for v in FAULT_VALUES],
+        colors=[NO_FAULT_COLOR if v == 0 else FAULT_MARK_COLOR for v in FAULT_VALUES],
+    )
+
+
+def series_style(series: Series) -> rr.SeriesLines:
+    """A gripper's series, named and coloured (logged static, once)."""
+    step = rr.components.InterpolationMode.StepAfter if series.step else None
+    return rr.SeriesLines(names=series.name, colors=series.color, interpolation_mode=step)
+
+
+def fault_marks_style() -> rr.SeriesPoints:
+    """The red crosses on the force plot where a record has an error or a fault."""
+    return rr.SeriesPoints(
+        names="error or fault", colors=FAULT_MARK_COLOR, markers="cross", marker_sizes=6.0
+    )
+
+
+def health_style(entity: str) -> rr.SeriesLines:
+    name, color = HEALTH_SERIES[entity]
+    return rr.SeriesLines(names=name, colors=color)

@@ -1,0 +1,248 @@
+"""The session core: one Source -> Decoding -> Tracker -> listeners loop for every command.
+
+```
+source (live taps behind a bounded queue, or a capture file, paced or not)
+   └─ batches of Items and SourceEvents ─> Decoding (framing, decoding, lint, pairing)
+                                             └─ Records ─> Tracker ─> StateSamples
+   listeners: on_raw(items), on_records(records), on_states(samples), on_event(event), tick, close
+```
+
+``decode``, ``stats``, ``live``, ``record``, ``bridge``, ``demo`` (and the TUI and Rerun views)
+all run this loop; they differ only in their source and listeners. Every call into a listener is
+guarded: a listener that raises is told (``on_error``), reported once to the others as an event,
+and detached; it never ends the session or loses a recording. Ctrl-C, SIGTERM and SIGHUP end a
+session cleanly: held bytes and requests are decided and every listener is closed.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+from decoders.model import Record
+
+from .listener import Listener
+from .model import ERROR, SourceEvent
+from .pipeline import Decoding
+from .sources.live import Tap
+from .sources.source import Batch, LiveSource, Source
+from .tracker import Tracker
+
+# source events after which a bus's held bytes will not be completed
+GAP_EVENTS = frozenset({"lost", "closed"})
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """How a session decodes. ``protocol``: the byte-stream protocol (None: detected per
+    stream); ``per_bus``: fixed protocols of named buses; ``byte_time_s``: seconds per byte of
+    named serial buses (10 bits / baud), to time frames inside a read; ``duration``: stop after
+    this many seconds of wall time (None: run until the source ends or Ctrl-C)."""
+
+    protocol: str | None = None
+    per_bus: dict[str, str] = field(default_factory=dict)
+    byte_time_s: dict[str, float] = field(default_factory=dict)
+    duration: float | None = None
+
+
+@dataclass
+class SessionCounts:
+    items: int = 0
+    records: int = 0
+    errors: int = 0
+    samples: int = 0
+    dropped: int = 0
+    interrupted: bool = False
+
+    def line(self) -> str:
+        return (
+            f"{self.items:,} chunks/frames captured, {self.records:,} records decoded, "
+            f"{self.errors:,} with errors, {self.dropped:,} dropped"
+        )
+
+
+class Session:
+    """Runs one source through the decoders into listeners. ``run()`` blocks until the source
+    ends, ``stop()`` is called (from any thread), the duration passes or Ctrl-C."""
+
+    def __init__(
+        self,
+        source: Source,
+        listeners: list[Listener],
+        options: SessionOptions | None = None,
+    ) -> None:
+        self.source = source
+        self.options = options or SessionOptions()
+        self.listeners: list[Listener] = list(listeners)
+        self.decoding = Decoding(
+            self.options.protocol,
+            self.options.per_bus,
+            positional_seq=source.positional,
+            byte_time_s=self.options.byte_time_s,
+        )
+        self.tracker = Tracker()
+        self.counts = SessionCounts()
+        self.detached: list[tuple[Listener, BaseException]] = []
+        self._stop = threading.Event()
+        self._closed = False
+
+    # -- running ---------------------------------------------------------------------------
+
+    def run(self) -> SessionCounts:
+        deadline = None
+        if self.options.duration is not None:
+            deadline = time.monotonic() + self.options.duration
+        # samples cost a copy of the state per reading: made only when someone reads them
+        self.tracker.samples = any(x.wants_states for x in self.listeners)
+        with _signals_as_interrupt():
+            try:
+                self.source.start()
+                for batch in self.source.batches(self._stop):
+                    self._step(batch)
+                    if deadline is not None and time.monotonic() >= deadline:
+                        break
+                    if self._stop.is_set() or not self.listeners:
+                        break  # stopped, or every output failed: nothing left to do
+            except KeyboardInterrupt:
+                self.counts.interrupted = True
+            finally:
+                self._finish()
+        return self.counts
+
+    def stop(self) -> None:
+        """End the session from another thread (the TUI's quit, a test)."""
+        self._stop.set()
+
+    def _finish(self) -> None:
+        try:
+            rest = self.source.stop()
+        except KeyboardInterrupt:
+            self.counts.interrupted = True
+            rest = []
+        self._step(rest, final=True)
+        self.counts.dropped = self.source.dropped
+        for listener in list(self.listeners):
+            self._call(listener, "close")
+        self._closed = True
+
+    # -- one batch ---------------------------------------------------------------------------
+
+    def _step(self, batch: Batch, final: bool = False) -> None:
+        items: list[Any] = []
+        records: list[Record] = []
+        feed = self.decoding.feed
+        for x in batch:
+            if isinstance(x, SourceEvent):
+                if x.kind in GAP_EVENTS:  # what was held for that bus ends before the gap
+                    records += self.decoding.gap(x.bus)
+                if items or records:  # keep events in order with the data around them
+                    self._emit(items, records)
+                    items, records = [], []
+                self._event(x)
+            else:
+                items.append(x)
+                records += feed(x)
+        now = time.time()
+        if final:
+            records += self.decoding.finish()
+        elif self.source.live:
+            records += self.decoding.tick(now)
+        self._emit(items, records)
+        for listener in tuple(self.listeners):  # a detach must not skip the next one
+            try:
+                listener.tick(now)
+            except Exception as exc:
+                self._detach(listener, exc)
+
+    def _emit(self, items: list[Any], records: list[Record]) -> None:
+        counts = self.counts
+        if items:
+            counts.items += len(items)
+            for listener in tuple(self.listeners):
+                if listener.wants_raw:
+                    self._call(listener, "on_raw", items)
+        if not records:
+            return
+        counts.records += len(records)
+        counts.errors += sum(1 for r in records if r.errors)
+        samples = self.tracker.update_many(records)
+        counts.samples += len(samples)
+        for listener in tuple(self.listeners):
+            self._call(listener, "on_records", records)
+            if samples and listener.wants_states:
+                self._call(listener, "on_states", samples)
+
+    def _event(self, event: SourceEvent) -> None:
+        for listener in tuple(self.listeners):
+            self._call(listener, "on_event", event)
+
+    # -- guarding ----------------------------------------------------------------------------
+
+    def _call(self, listener: Listener, method: str, *args: Any) -> None:
+        if listener not in self.listeners:
+            return  # detached earlier in this batch
+        try:
+            getattr(listener, method)(*args)
+        except Exception as exc:
+            self._detach(listener, exc)
+
+    def _detach(self, listener: Listener, exc: BaseException) -> None:
+        """Take a failing listener out of the session, tell it and everyone else, once."""
+        if listener not in self.listeners:
+            return
+        self.listeners.remove(listener)
+        self.detached.append((listener, exc))
+        name = getattr(listener, "label", type(listener).__name__)
+        event = SourceEvent(
+            time.time(),
+            "session",
+            ERROR,
+            f"output {name} failed and was detached: {type(exc).__name__}: {exc}",
+            "listener_failed",
+        )
+        try:
+            listener.on_error(exc)
+        except Exception:
+            pass  # it is already out; its own error report failing changes nothing
+        try:
+            if not self._closed:
+                listener.close()
+        except Exception:
+            pass
+        self._event(event)
+
+
+def live_session(
+    taps: list[Tap],
+    listeners: list[Listener],
+    *,
+    queue_size: int = 200_000,
+    **options: Any,
+) -> Session:
+    """A session on live taps (``options``: the fields of SessionOptions)."""
+    return Session(LiveSource(taps, queue_size), listeners, SessionOptions(**options))
+
+
+@contextmanager
+def _signals_as_interrupt() -> Iterator[None]:
+    """SIGTERM (kill) and SIGHUP (terminal closed) end a session like Ctrl-C does, so
+    recordings are finished (only possible from the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    wanted = [signal.SIGTERM, getattr(signal, "SIGHUP", None)]
+    previous = {sig: signal.signal(sig, handler) for sig in wanted if sig is not None}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)

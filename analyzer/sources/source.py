@@ -1,0 +1,140 @@
+"""What a session reads from: live taps behind a bounded queue, or a capture file.
+
+A Source yields batches of ``Item``s (raw input) and ``SourceEvent``s in arrival order. Live taps
+capture on their own threads into a ``TapQueue`` (a slow consumer never blocks them: drops are
+counted and reported as events); a capture file is read on the session's thread, paced to its own
+timing when a replay speed is given. The session decodes each batch and calls its listeners.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING
+
+from ..model import WARNING, Item, SourceEvent
+from .live import Tap, TapQueue
+from .pacing import paced
+
+if TYPE_CHECKING:
+    from .capture import CaptureReader
+
+Batch = list[Item | SourceEvent]
+
+LIVE_BATCH_S = 0.05  # live: decode and show 20 times a second
+CAPTURE_BATCH_ITEMS = 2048  # captures: CAN frames (or byte chunks) per batch
+CAPTURE_BATCH_BYTES = 1 << 16  # ... or this many bytes of chunks
+
+
+class Source:
+    """Base: ``start()``, iterate ``batches(stop)``, then ``stop()`` returns what is left."""
+
+    #: live sources are ticked with wall time (quiet lines decide their held bytes)
+    live = False
+    #: records can be numbered by their place in the input (offset / CAN index)
+    positional = False
+    #: items lost because the session fell behind (live only)
+    dropped = 0
+
+    def start(self) -> None:
+        pass
+
+    def batches(self, stop: threading.Event) -> Iterator[Batch]:
+        raise NotImplementedError
+
+    def stop(self) -> Batch:
+        return []
+
+    @property
+    def errors(self) -> list[str]:
+        """Damage found in the input (a capture file); empty for live sources."""
+        return []
+
+
+class LiveSource(Source):
+    """One or more taps feeding one bounded queue."""
+
+    live = True
+
+    def __init__(self, taps: list[Tap], queue_size: int = 200_000) -> None:
+        self.taps = taps
+        self.queue = TapQueue(queue_size)
+        self.dropped = 0
+        self.on_started: Callable[[], None] | None = None  # runs once the taps listen
+
+    def start(self) -> None:
+        for tap in self.taps:
+            tap.start(self.queue)
+        if self.on_started is not None:
+            self.on_started()
+
+    def batches(self, stop: threading.Event) -> Iterator[Batch]:
+        get = self.queue.get_batch
+        while not stop.is_set():
+            batch = get(LIVE_BATCH_S)
+            drops = self._drops()
+            if drops is not None:
+                batch.append(drops)
+            yield batch
+
+    def stop(self) -> Batch:
+        rest: Batch = []
+        for tap in self.taps:
+            try:
+                tap.stop()
+            except Exception as exc:  # a failing close must not lose the recording
+                rest.append(
+                    SourceEvent(
+                        time.time(), tap.bus, WARNING, f"error while closing: {exc}", "closed"
+                    )
+                )
+        rest = self.queue.get_batch(0.0, max_items=10**9) + rest
+        drops = self._drops()
+        if drops is not None:
+            rest.append(drops)
+        return rest
+
+    def _drops(self) -> SourceEvent | None:
+        n = self.queue.new_drops()
+        if not n:
+            return None
+        self.dropped += n
+        return SourceEvent(
+            time.time(), "*", WARNING, f"consumer fell behind: dropped {n} items", "drops", n
+        )
+
+
+class CaptureSource(Source):
+    """A capture file, read on the session's thread; ``speed`` paces it to its own timing
+    (1 = real time, 10 = ten times faster, None = as fast as possible)."""
+
+    def __init__(self, reader: CaptureReader, speed: float | None = None) -> None:
+        self.reader = reader
+        self.speed = speed
+        self.positional = reader.single_stream
+
+    @property
+    def errors(self) -> list[str]:
+        return self.reader.errors
+
+    def batches(self, stop: threading.Event) -> Iterator[Batch]:
+        if self.speed is not None:  # paced: each item as it falls due
+            for x in paced(self.reader, self.speed):
+                yield [x]
+                if stop.is_set():
+                    return
+            return
+        batch: Batch = []
+        size = 0
+        for x in self.reader:
+            batch.append(x)
+            if type(x) is Item:
+                size += len(x.payload.data)
+            if len(batch) >= CAPTURE_BATCH_ITEMS or size >= CAPTURE_BATCH_BYTES:
+                yield batch
+                batch, size = [], 0
+                if stop.is_set():
+                    return
+        if batch:
+            yield batch

@@ -1,0 +1,164 @@
+"""What the side panels show, folded from records as they arrive (on the session's thread):
+problems grouped by flag code and device (Wireshark's expert info), latency per command and per
+gripper, and every register seen per gripper. ``snapshot()`` copies them for the screen.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+from decoders import flags as F
+from decoders.model import FRAME, REQUEST, RESPONSE, Record
+
+LATENCY_KEEP: Final = 2000  # latencies kept per key for percentiles (the latest)
+HISTOGRAM_BINS: Final = 8
+NOT_PROBLEMS: Final = frozenset({F.FOREIGN, F.ESTIMATED_TIME})  # notes, not problems
+SERIAL_SKIP: Final = frozenset({"id", "state_text", "fault_text", "position_mm", "data"})
+
+DeviceKey = tuple[str, int]
+
+
+@dataclass
+class ProblemGroup:
+    code: str
+    bus: str
+    device: int | None
+    count: int
+    first: int  # store index of the first occurrence
+    level: str  # "error" or "warning"
+
+
+@dataclass
+class LatencyStats:
+    count: int
+    p50: float
+    p95: float
+    max: float
+    histogram: list[int]  # counts in HISTOGRAM_BINS equal bins from 0 to max
+
+
+@dataclass
+class RegisterSeen:
+    value: Any
+    previous: Any = None
+    count: int = 1
+    first_t: float | None = None
+    last_t: float | None = None
+    changes: int = 0
+
+    @property
+    def rate_hz(self) -> float | None:
+        if self.count < 2 or self.first_t is None or self.last_t is None:
+            return None
+        span = self.last_t - self.first_t
+        return (self.count - 1) / span if span > 0 else None
+
+
+@dataclass
+class Snapshot:
+    problems: list[ProblemGroup] = field(default_factory=list)
+    latency_by_command: dict[str, LatencyStats] = field(default_factory=dict)
+    latency_by_device: dict[DeviceKey, LatencyStats] = field(default_factory=dict)
+    registers: dict[DeviceKey, dict[str, RegisterSeen]] = field(default_factory=dict)
+
+
+def latency_stats(values: deque[float] | list[float]) -> LatencyStats | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    n = len(ordered)
+    top = ordered[-1]
+    bins = [0] * HISTOGRAM_BINS
+    for v in ordered:
+        bins[min(HISTOGRAM_BINS - 1, int(v / top * HISTOGRAM_BINS)) if top > 0 else 0] += 1
+    return LatencyStats(n, ordered[n // 2], ordered[min(n - 1, int(n * 0.95))], top, bins)
+
+
+class Aggregates:
+    """Folds records into the panels' tables; one thread writes (see the module doc)."""
+
+    def __init__(self) -> None:
+        self.problems: dict[tuple[str, str, int | None], ProblemGroup] = {}
+        self.latency_command: dict[str, deque[float]] = {}
+        self.latency_device: dict[DeviceKey, deque[float]] = {}
+        self.registers: dict[DeviceKey, dict[str, RegisterSeen]] = {}
+
+    def add(self, records: list[Record], first_index: int) -> None:
+        for k, rec in enumerate(records):
+            if rec.flags:
+                self._problems(rec, first_index + k)
+            if rec.kind != FRAME or rec.device is None or rec.errors:
+                continue
+            key = (rec.bus, rec.device)
+            if rec.latency_ms is not None and rec.direction == RESPONSE:
+                self._latency(self.latency_command, rec.name or "?", rec.latency_ms)
+                self._latency(self.latency_device, key, rec.latency_ms)
+            self._registers(rec, key)
+
+    def _problems(self, rec: Record, index: int) -> None:
+        level = "error" if rec.errors else "warning"
+        for code in rec.flags:
+            if code in NOT_PROBLEMS:
+                continue
+            k = (code, rec.bus, rec.device)
+            group = self.problems.get(k)
+            if group is None:
+                self.problems[k] = ProblemGroup(code, rec.bus, rec.device, 1, index, level)
+            else:
+                group.count += 1
+
+    @staticmethod
+    def _latency(table: dict[Any, deque[float]], key: Any, value: float) -> None:
+        values = table.get(key)
+        if values is None:
+            values = table[key] = deque(maxlen=LATENCY_KEEP)
+        values.append(value)
+
+    def _registers(self, rec: Record, key: DeviceKey) -> None:
+        f = rec.fields
+        seen: dict[str, Any] = {}
+        values = f.get("values")
+        if isinstance(values, dict):
+            seen.update(values)
+        elif rec.direction == REQUEST and isinstance(f.get("name"), str) and "value" in f:
+            seen[f["name"]] = f["value"]
+        elif rec.protocol == "eg2-serial" and rec.direction == RESPONSE:
+            seen.update(
+                (k, v)
+                for k, v in f.items()
+                if k not in SERIAL_SKIP and isinstance(v, int | float | str)
+            )
+        if not seen:
+            return
+        table = self.registers.setdefault(key, {})
+        for name, value in seen.items():
+            reg = table.get(name)
+            if reg is None:
+                table[name] = RegisterSeen(value, None, 1, rec.t, rec.t)
+                continue
+            if value != reg.value:
+                reg.previous, reg.value = reg.value, value
+                reg.changes += 1
+            reg.count += 1
+            reg.last_t = rec.t if rec.t is not None else reg.last_t
+
+    def snapshot(self, with_latency: bool) -> Snapshot:
+        snap = Snapshot(
+            problems=[ProblemGroup(**vars(g)) for g in self.problems.values()],
+            registers={
+                k: {n: RegisterSeen(**vars(r)) for n, r in table.items()}
+                for k, table in self.registers.items()
+            },
+        )
+        if with_latency:
+            for name, values in self.latency_command.items():
+                stats = latency_stats(values)
+                if stats is not None:
+                    snap.latency_by_command[name] = stats
+            for key, values in self.latency_device.items():
+                stats = latency_stats(values)
+                if stats is not None:
+                    snap.latency_by_device[key] = stats
+        return snap

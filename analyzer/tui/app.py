@@ -1,0 +1,546 @@
+"""The TUI application: the panes, the keys, and one session on a worker thread.
+
+The session (live taps or a capture) runs in a Textual thread worker; the ``TuiFeed`` listener
+fills the store on that thread and posts a ``FeedUpdate`` 10-20 times a second. Pausing the
+view never pauses capture or recording; quitting stops the session and waits for it to close
+every listener, so a recording is complete when the app has gone.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+from textual import on, work
+from textual.app import App, ComposeResult, SystemCommand
+from textual.binding import BindingType
+from textual.containers import Horizontal, Vertical
+from textual.screen import Screen
+from textual.timer import Timer
+from textual.widgets import Footer, Input, RichLog, Static, TabbedContent, TabPane
+
+from ..model import LEVEL_NAMES, SourceEvent
+from ..session import Session
+from . import keys
+from .aggregates import Snapshot
+from .export import export, export_format
+from .feed import TRIGGERS, TuiFeed
+from .filter import FilterError, parse
+from .messages import ByteSelected, FeedUpdate, FieldSelected, JumpTo, RowSelected
+from .replay import ReplaySource, next_speed, speed_text
+from .rows import TimeMode
+from .screens import HelpScreen, LetterScreen, PromptScreen
+from .store import RecordStore
+from .widgets.detail import DetailTree, HexPane
+from .widgets.devices import DevicePanel
+from .widgets.frame_list import FrameList
+from .widgets.latency import LatencyPanel
+from .widgets.problems import ProblemsPanel
+from .widgets.registers import RegisterWatch
+
+DETAIL_S = 0.08  # the detail pane follows the cursor at most this often
+
+
+@dataclass
+class SessionPlan:
+    """How the app gets its session: ``build(feed)`` makes it with the feed among its
+    listeners. ``live``: taps (ages by the wall clock) or a capture; ``replay``: the capture
+    source, for pause and speed; ``recorder``: where marks go; ``freeze_on``: the armed
+    trigger; ``title``: what is watched."""
+
+    build: Callable[[TuiFeed], Session]
+    live: bool = True
+    replay: ReplaySource | None = None
+    recorder: Any = None
+    recording_path: str | None = None
+    freeze_on: str | None = None
+    title: str = "eg2scope"
+    on_done: list[Callable[[Session], None]] = field(default_factory=list)
+
+
+class Eg2ScopeApp(App[int]):
+    """See the module doc."""
+
+    CSS_PATH = "eg2scope.tcss"
+    TITLE = "eg2scope"
+    BINDINGS: ClassVar[list[BindingType]] = list(keys.bindings())
+
+    def __init__(self, plan: SessionPlan, store: RecordStore | None = None) -> None:
+        super().__init__()
+        self.plan = plan
+        self.store = store if store is not None else RecordStore()
+        self.feed = TuiFeed(self.store)
+        self.feed.recorder = plan.recorder
+        self.session: Session | None = None
+        self.done = False
+        self.captured = 0
+        self.dropped = 0
+        self.trigger: str | None = plan.freeze_on
+        self.frozen_on: int | None = None
+        self.export_note = ""
+        self.snapshot: Snapshot | None = None
+        self.panels_stale = False
+        self._detail_due: int | None = None
+        self._detail_timer: Timer | None = None
+        self.sub_title = plan.title
+
+    # -- layout ----------------------------------------------------------------------------
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(id="main"):
+            with Vertical(id="left"):
+                yield FrameList(self.store, id="frames")
+                yield Input(placeholder="filter: dev == 1 and bus == can0", id="filter")
+                yield Static("", id="filter-error")
+                yield Static("", id="status")
+            with Vertical(id="right"):
+                yield DetailTree(id="detail")
+                yield HexPane(id="hex")
+        with TabbedContent(id="panels", initial="devices"):
+            with TabPane("Devices", id="devices"):
+                yield DevicePanel(self.clock, id="device-panel")
+            with TabPane("Problems", id="problems"):
+                yield ProblemsPanel(id="problem-panel")
+            with TabPane("Registers", id="registers"):
+                yield RegisterWatch(id="register-panel")
+            with TabPane("Latency", id="latency"):
+                yield LatencyPanel(id="latency-panel")
+            with TabPane("Events", id="events"):
+                yield RichLog(id="event-log", max_lines=2000, markup=False)
+        yield Footer()
+
+    @property
+    def main_screen(self) -> Screen[Any]:
+        """The screen of the panes (a prompt or the help may be on top of it)."""
+        return self.screen_stack[0]
+
+    @property
+    def frames(self) -> FrameList:
+        return self.main_screen.query_one(FrameList)
+
+    def on_mount(self) -> None:
+        self.main_screen.query_one("#filter", Input).display = False
+        self.main_screen.query_one("#filter-error", Static).display = False
+        self.frames.focus()
+        self.feed.target = self
+        if self.trigger:
+            self.feed.arm(self.trigger)
+        self.set_interval(0.25, self.show_status)
+        self.set_interval(0.25, self.show_panels)
+        self.show_status()
+        self.run_session()
+
+    # -- the session -----------------------------------------------------------------------
+
+    @work(thread=True, exclusive=True, name="session", exit_on_error=False)
+    def run_session(self) -> None:
+        session = self.plan.build(self.feed)
+        self.session = session
+        self.feed.states = lambda: session.tracker.states
+        self.feed.counts = lambda: (session.counts.items, session.source.dropped)
+        session.run()
+        for done in self.plan.on_done:
+            done(session)
+
+    def clock(self) -> float | None:
+        """Ages are measured on the wall clock live, on the capture's own clock otherwise."""
+        return time.time() if self.plan.live else self.store.t_last
+
+    def on_feed_update(self, update: FeedUpdate) -> None:
+        self.captured, self.dropped = update.captured, update.dropped
+        self.frames.take_new(update.count)
+        self.main_screen.query_one(DevicePanel).take(update.devices, update.changed)
+        if update.snapshot is not None:
+            self.snapshot = update.snapshot
+            self.panels_stale = True
+        log = self.main_screen.query_one("#event-log", RichLog)
+        for event in update.events:
+            log.write(self._event_line(event))
+        if update.trigger is not None:
+            self._freeze(update.trigger)
+        if update.done:
+            self.done = True
+            self.show_panels()
+
+    def show_panels(self) -> None:
+        """Redraw the visible panel (4 times a second; hidden ones are drawn when shown)."""
+        active = self.main_screen.query_one(TabbedContent).active
+        snap = self.snapshot
+        if active == "devices":
+            panel = self.main_screen.query_one(DevicePanel)
+            if snap is not None and snap.latency_by_device:
+                panel.latency = snap.latency_by_device
+            panel.redraw()
+        if snap is None or (not self.panels_stale and active != "devices"):
+            return
+        if active == "problems":
+            self.main_screen.query_one(ProblemsPanel).take(snap.problems)
+        elif active == "registers":
+            self.main_screen.query_one(RegisterWatch).take(snap.registers)
+        elif active == "latency":
+            self.main_screen.query_one(LatencyPanel).take(snap.latency_by_command)
+        self.panels_stale = active == "devices"
+
+    @on(TabbedContent.TabActivated)
+    def tab_activated(self) -> None:
+        self.panels_stale = True
+        self.show_panels()
+
+    @staticmethod
+    def _event_line(event: SourceEvent) -> str:
+        stamp = time.strftime("%H:%M:%S", time.localtime(event.t)) if event.t > 1e8 else ""
+        count = f" (x{event.count})" if event.count > 1 else ""
+        level = LEVEL_NAMES.get(event.level, "info")
+        return f"{stamp} {level:7} {event.bus}: {event.message}{count}"
+
+    def _freeze(self, index: int) -> None:
+        self.trigger = None
+        self.frozen_on = index
+        frames = self.frames
+        if not frames.jump_to_index(index):
+            frames.set_filter(None)
+            self.main_screen.query_one("#filter", Input).value = ""
+            frames.jump_to_index(index)
+        self.bell()
+        self.notify(
+            f"trigger: frozen on #{self.store.seq[index]} (capture goes on; End follows)",
+            severity="warning",
+        )
+
+    # -- status ----------------------------------------------------------------------------
+
+    def status_text(self) -> str:
+        frames = self.frames
+        parts = []
+        if self.plan.replay is not None:
+            replay = self.plan.replay
+            filled = int(replay.position * 20)
+            bar = "█" * filled + "░" * (20 - filled)
+            state = "paused" if replay.paused else "done" if self.done else "playing"
+            parts.append(f"replay {state} {speed_text(replay.speed)} {bar} {replay.position:.0%}")
+        elif self.done:
+            parts.append("capture ended")
+        else:
+            parts.append("live")
+        if frames.follow:
+            parts.append("following")
+        else:
+            parts.append(f"paused, {frames.new_while_paused:,} new")
+        shown = frames.row_count
+        total = self.store.count
+        parts.append(f"{total:,} records" if shown == total else f"{shown:,} of {total:,} shown")
+        if self.dropped:
+            parts.append(f"{self.dropped:,} DROPPED")
+        if frames.marks:
+            parts.append("marks " + "".join(sorted(frames.marks)))
+        if self.trigger:
+            parts.append(f"trigger armed: {self.trigger}")
+        parts.append(f"time: {frames.time_mode.value}")
+        if self.plan.recording_path:
+            parts.append(f"recording {Path(self.plan.recording_path).name}")
+        return " | ".join(parts)
+
+    def show_status(self) -> None:
+        self.main_screen.query_one("#status", Static).update(self.status_text())
+
+    # -- selection, detail, hex --------------------------------------------------------------
+
+    @on(RowSelected)
+    def row_selected(self, event: RowSelected) -> None:
+        # at most DETAIL_S apart: following a fast bus must not rebuild the tree per batch
+        self._detail_due = event.index
+        if self._detail_timer is None:
+            self._detail_timer = self.set_timer(DETAIL_S, self._apply_detail)
+
+    def _apply_detail(self) -> None:
+        self._detail_timer = None
+        self._show_detail(self._detail_due)
+
+    def _show_detail(self, index: int | None) -> None:
+        tree = self.main_screen.query_one(DetailTree)
+        hexpane = self.main_screen.query_one(HexPane)
+        if index is None:
+            tree.show(None)
+            hexpane.show(b"")
+            return
+        rec = self.store.record(index)
+        pair_text = ""
+        if rec.pair is not None:
+            pair_index = self.store.index_of_seq(rec.pair)
+            if pair_index is not None:
+                pair_text = f"({self.store.name_of(pair_index)}: {self.store.summary[pair_index]})"
+        tree.show(rec, pair_text)
+        hexpane.show(rec.raw)
+        device = self.store.device_of(index)
+        if device is not None:
+            self.main_screen.query_one(RegisterWatch).follow((self.store.bus_of(index), device))
+
+    @on(FieldSelected)
+    def field_selected(self, event: FieldSelected) -> None:
+        self.main_screen.query_one(HexPane).span = event.span
+
+    @on(ByteSelected)
+    def byte_selected(self, event: ByteSelected) -> None:
+        self.main_screen.query_one(DetailTree).select_offset(event.offset)
+
+    @on(JumpTo)
+    def jump_to(self, event: JumpTo) -> None:
+        self.go_to_index(event.index)
+
+    def go_to_index(self, index: int) -> None:
+        frames = self.frames
+        if not frames.jump_to_index(index):
+            self.notify("that frame is hidden by the filter: filter cleared")
+            self.main_screen.query_one("#filter", Input).value = ""
+            frames.set_filter(None)
+            frames.jump_to_index(index)
+        frames.focus()
+
+    # -- actions -----------------------------------------------------------------------------
+
+    async def action_quit(self) -> None:
+        """Stop the session and wait until every listener (the recording) is closed."""
+        self.notify("closing the session ...")
+        if self.session is not None:
+            self.session.stop()
+        if self.plan.replay is not None:
+            self.plan.replay.resume()  # a paused replay must see the stop
+        for worker in self.workers:
+            if worker.name == "session":
+                await worker.wait()
+        self.exit(0)
+
+    def action_help(self) -> None:
+        self.push_screen(HelpScreen())
+
+    def action_pause(self) -> None:
+        replay = self.plan.replay
+        if replay is not None and not self.done:
+            paused = replay.toggle()
+            self.notify("replay paused" if paused else "replay resumed")
+        elif self.frames.follow:
+            self.frames.follow = False
+        else:
+            self.frames.action_follow()
+        self.show_status()
+
+    def action_follow(self) -> None:
+        self.frames.action_follow()
+        self.frames.focus()
+
+    def action_filter(self) -> None:
+        box = self.main_screen.query_one("#filter", Input)
+        box.display = True
+        box.focus()
+
+    @on(Input.Changed, "#filter")
+    def filter_changed(self, event: Input.Changed) -> None:
+        error = self.main_screen.query_one("#filter-error", Static)
+        try:
+            parse(event.value)
+        except FilterError as exc:
+            error.update(f"{' ' * exc.position}^ {exc.message}")
+            error.display = True
+            event.input.add_class("-invalid")
+            return
+        error.display = False
+        event.input.remove_class("-invalid")
+
+    @on(Input.Submitted, "#filter")
+    def filter_submitted(self, event: Input.Submitted) -> None:
+        try:
+            compiled = parse(event.value)
+        except FilterError:
+            return  # the error is shown under the line
+        self.frames.set_filter(compiled)
+        if compiled is None:
+            event.input.display = False
+        self.frames.focus()
+        self.show_status()
+
+    def action_search(self) -> None:
+        def done(text: str | None) -> None:
+            frames = self.frames
+            frames.search = re.compile(re.escape(text), re.IGNORECASE) if text else None
+            frames.restyle()
+            if frames.search is not None and not frames.find(1, frames.search_matches):
+                frames.find(-1, frames.search_matches)
+
+        current = self.frames.search.pattern if self.frames.search else ""
+        self.push_screen(
+            PromptScreen("search (n/N: next/previous)", re.sub(r"\\(.)", r"\1", current)), done
+        )
+
+    def action_next_problem(self) -> None:
+        self._step(1)
+
+    def action_previous_problem(self) -> None:
+        self._step(-1)
+
+    def _step(self, step: int) -> None:
+        frames = self.frames
+        match = frames.search_matches if frames.search is not None else frames.is_problem
+        if not frames.find(step, match):
+            what = "match" if frames.search is not None else "problem"
+            self.notify(f"no {'next' if step > 0 else 'previous'} {what}")
+
+    def action_pair(self) -> None:
+        frames = self.frames
+        index = frames.selected
+        pair = None if index is None else self.store.pair_of(index)
+        target = None if pair is None else self.store.index_of_seq(pair)
+        if target is None:
+            self.notify("this frame has no pair")
+            return
+        self.go_to_index(target)
+
+    def action_time_reference(self) -> None:
+        frames = self.frames
+        index = frames.selected
+        frames.reference = None if index is None or index == frames.reference else index
+        if frames.reference is not None:
+            frames.time_mode = TimeMode.REFERENCE
+        frames.restyle()
+        self.show_status()
+
+    def action_time_mode(self) -> None:
+        frames = self.frames
+        frames.time_mode = frames.time_mode.next()
+        frames.restyle()
+        self.show_status()
+
+    def action_set_mark(self) -> None:
+        self.push_screen(LetterScreen("mark this frame: press a letter"), self._set_mark)
+
+    def action_goto_mark(self) -> None:
+        self.push_screen(LetterScreen("go to mark: press a letter"), self._goto_mark)
+
+    def _set_mark(self, letter: str | None) -> None:
+        frames = self.frames
+        index = frames.selected
+        if not letter or index is None:
+            return
+        frames.marks[letter] = index
+        frames.restyle()
+        seq = self.store.seq[index]
+        saved = self.feed.add_mark(self.store.time(index), letter, seq)
+        self.notify(f"mark {letter} on #{seq}" + (" (saved in the recording)" if saved else ""))
+        self.show_status()
+
+    def _goto_mark(self, letter: str | None) -> None:
+        if not letter:
+            return
+        if letter in self.frames.marks:
+            self.go_to_index(self.frames.marks[letter])
+        else:
+            self.notify(f"no mark {letter}")
+
+    def action_goto(self) -> None:
+        def check(text: str) -> str | None:
+            return None if self._goto_target(text) is not None else "a frame number, or t=SECONDS"
+
+        def done(text: str | None) -> None:
+            target = self._goto_target(text or "")
+            if target is not None:
+                self.go_to_index(target)
+
+        self.push_screen(
+            PromptScreen("go to frame number (1234) or time (t=12.5)", check=check), done
+        )
+
+    def _goto_target(self, text: str) -> int | None:
+        text = text.strip().lower()
+        try:
+            if text.startswith("t=") or text.endswith("s"):
+                seconds = float(text.removeprefix("t=").removesuffix("s"))
+                return self.store.first_index_at_or_after((self.store.t0 or 0.0) + seconds)
+            return self.store.index_of_seq(int(text.lstrip("#")))
+        except ValueError:
+            return None
+
+    def action_arm_trigger(self) -> None:
+        if self.trigger:
+            self.trigger = None
+            self.feed.arm(None)
+            self.notify("trigger disarmed")
+        else:
+            self.trigger = self.plan.freeze_on or "error"
+            self.feed.arm(self.trigger)
+            self.notify(f"trigger armed: freeze on the next {self.trigger}")
+        self.show_status()
+
+    def action_faster(self) -> None:
+        self._speed(1)
+
+    def action_slower(self) -> None:
+        self._speed(-1)
+
+    def _speed(self, step: int) -> None:
+        replay = self.plan.replay
+        if replay is None:
+            self.notify("speed applies to replays of captures")
+            return
+        replay.set_speed(next_speed(replay.speed, step))
+        self.show_status()
+
+    def export_indices(self) -> Iterable[int]:
+        frames = self.frames
+        shown = range(frames.row_count)
+        positions: Iterable[int] = shown
+        if "a" in frames.marks and "b" in frames.marks:
+            lo, hi = sorted((frames.marks["a"], frames.marks["b"]))
+            positions = (p for p in shown if lo <= frames.index_at(p) <= hi)
+        return [frames.index_at(p) for p in positions]
+
+    def action_export(self) -> None:
+        def check(text: str) -> str | None:
+            try:
+                export_format(text)
+            except ValueError as exc:
+                return str(exc)
+            return None
+
+        def done(path: str | None) -> None:
+            if path:
+                self.run_export(path, list(self.export_indices()))
+
+        marks = self.frames.marks
+        what = "marked range a..b" if "a" in marks and "b" in marks else "shown records"
+        self.push_screen(
+            PromptScreen(
+                f"export the {what} to (.jsonl, .csv, .mcap):", "eg2scope-export.jsonl", check=check
+            ),
+            done,
+        )
+
+    @work(thread=True, name="export")
+    def run_export(self, path: str, indices: list[int]) -> None:
+        try:
+            n = export(self.store, indices, path)
+        except (OSError, ValueError) as exc:
+            self.call_from_thread(self.notify, f"export failed: {exc}", severity="error")
+            return
+        self.export_note = f"exported {n:,} records to {Path(path).name}"
+        self.call_from_thread(self.notify, self.export_note)
+
+    def action_tab(self, name: str) -> None:
+        self.main_screen.query_one(TabbedContent).active = name
+
+    def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
+        yield from super().get_system_commands(screen)
+        for key in keys.KEYS:
+            if key.action in ("command_palette", "help"):
+                continue
+            title = key.description.split(":")[0].split(" (")[0]
+            yield SystemCommand(
+                title.capitalize(),
+                f"{key.description} [{keys.shown_keys(key)}]",
+                lambda action=key.action: self.run_action(action),
+            )
+
+
+__all__ = ["TRIGGERS", "Eg2ScopeApp", "SessionPlan"]

@@ -1,0 +1,163 @@
+"""The TUI's session listener: fills the record store and the panels' tables on the session's
+thread, and posts one ``FeedUpdate`` to the app every ``POST_INTERVAL_S`` (never one message
+per record). It also carries the app's requests back to the session's thread: marks to write
+into the recording, which only that thread may write.
+
+The trigger (``--freeze-on``) is checked here, on every record as it is stored, so the first
+match is found even when a batch holds thousands of records.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, Final, Protocol
+
+from decoders import flags as F
+from decoders.model import Record
+
+from ..listener import Listener
+from ..model import SourceEvent, StateSample
+from .aggregates import Aggregates
+from .messages import DeviceRow, FeedUpdate
+from .store import RecordStore
+
+POST_INTERVAL_S: Final = 0.075  # about 13 updates a second
+PANELS_INTERVAL_S: Final = 0.5  # latency percentiles are recomputed this often
+
+TRIGGERS: Final[dict[str, Callable[[Record], bool]]] = {
+    "error": lambda r: bool(r.errors),
+    "fault": lambda r: F.DEVICE_FAULT in r.flags,
+    "unanswered": lambda r: F.UNANSWERED in r.flags,
+}
+
+
+class MarkWriter(Protocol):
+    def write_mark(self, t: float | None, name: str, seq: int | None = None) -> None: ...
+
+
+class Poster(Protocol):
+    def post_message(self, message: Any) -> bool: ...
+
+
+class TuiFeed(Listener):
+    """See the module doc. ``post``: where updates go (the app); ``states``: the session
+    tracker's states, read on the session's thread only."""
+
+    wants_states = True
+
+    def __init__(self, store: RecordStore | None = None) -> None:
+        self.store = store if store is not None else RecordStore()
+        self.aggregates = Aggregates()
+        self.label = "the TUI"
+        self.target: Poster | None = None
+        self.states: Callable[[], dict[tuple[str, int], Any]] | None = None
+        self.counts: Callable[[], tuple[int, int]] | None = None  # (captured, dropped)
+        self.recorder: MarkWriter | None = None
+        self.trigger: str | None = None  # armed: the TRIGGERS key
+        self._fired: int | None = None
+        self._changed: set[tuple[str, int, str]] = set()
+        self._events: list[SourceEvent] = []
+        self._marks: list[tuple[float | None, str, int | None]] = []
+        self._lock = threading.Lock()  # guards _marks and trigger (set from the app)
+        self._next_post = 0.0
+        self._next_panels = 0.0
+        self.closed = False
+
+    # -- from the app (any thread) ---------------------------------------------------------
+
+    def arm(self, trigger: str | None) -> None:
+        """Arm the trigger (a TRIGGERS key) or disarm it (None); it fires once per arming."""
+        if trigger is not None and trigger not in TRIGGERS:
+            raise ValueError(f"unknown trigger {trigger!r}; choose from {', '.join(TRIGGERS)}")
+        with self._lock:
+            self.trigger = trigger
+
+    def add_mark(self, t: float | None, name: str, seq: int | None) -> bool:
+        """Queue a mark for the recording; False when nothing records."""
+        if self.recorder is None:
+            return False
+        with self._lock:
+            self._marks.append((t, name, seq))
+        return True
+
+    # -- the listener (the session's thread) -------------------------------------------------
+
+    def on_records(self, records: list[Record]) -> None:
+        first = self.store.count
+        self.store.append(records)
+        self.aggregates.add(records, first)
+        trigger = self.trigger
+        if trigger is not None and self._fired is None:
+            match = TRIGGERS[trigger]
+            for k, rec in enumerate(records):
+                if match(rec):
+                    self._fired = first + k
+                    with self._lock:
+                        self.trigger = None  # one shot: the user re-arms
+                    break
+
+    def on_states(self, samples: list[StateSample]) -> None:
+        changed = self._changed
+        for s in samples:
+            for name in s.changed:
+                changed.add((s.bus, s.device, name))
+
+    def on_event(self, event: SourceEvent) -> None:
+        self._events.append(event)
+
+    def tick(self, now: float) -> None:
+        self._write_marks()
+        mono = time.monotonic()
+        if mono >= self._next_post:
+            self._post(mono)
+
+    def close(self) -> None:
+        self._write_marks()
+        self.closed = True
+        self._post(time.monotonic(), done=True)
+
+    def on_error(self, exc: BaseException) -> None:
+        self._events.append(
+            SourceEvent(time.time(), "tui", 4, f"the screen failed: {exc}", "listener_failed")
+        )
+
+    # -- inside -----------------------------------------------------------------------------
+
+    def _write_marks(self) -> None:
+        if not self._marks or self.recorder is None:
+            return
+        with self._lock:
+            marks, self._marks = self._marks, []
+        for t, name, seq in marks:
+            self.recorder.write_mark(t, name, seq)
+
+    def _devices(self) -> list[DeviceRow]:
+        if self.states is None:
+            return []
+        return [
+            DeviceRow(st.bus, st.device, st.protocol, st.t, dict(st.values))
+            for st in list(self.states().values())
+        ]
+
+    def _post(self, mono: float, done: bool = False) -> None:
+        self._next_post = mono + POST_INTERVAL_S
+        panels = done or mono >= self._next_panels
+        if panels:
+            self._next_panels = mono + PANELS_INTERVAL_S
+        captured, dropped = self.counts() if self.counts is not None else (0, 0)
+        update = FeedUpdate(
+            count=self.store.count,
+            devices=self._devices(),
+            changed=self._changed,
+            snapshot=self.aggregates.snapshot(with_latency=panels),
+            events=self._events,
+            trigger=self._fired,
+            captured=captured,
+            dropped=dropped,
+            done=done,
+        )
+        self._changed, self._events, self._fired = set(), [], None
+        if self.target is not None:
+            self.target.post_message(update)

@@ -1,0 +1,86 @@
+"""Every key of the TUI, in one table: the app's bindings, the footer, the help screen, the
+command palette and ``eg2scope tui --help`` are all made from it. Each binding has an ``id``
+(``eg2scope.<action>``), so it can be remapped through Textual's keymap."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+if TYPE_CHECKING:
+    from textual.binding import BindingType
+
+
+@dataclass(frozen=True)
+class Key:
+    keys: str  # Textual key names, comma separated
+    action: str
+    description: str
+    footer: bool = False
+    shown: str = ""  # how the help writes the key, when not the key names
+
+
+KEYS: Final[tuple[Key, ...]] = (
+    Key("question_mark,f1", "help", "help: every key", True, "? F1"),
+    Key("q", "quit", "quit (ends the capture and finishes the recording)", True),
+    Key("space", "pause", "pause/resume the view (live) or the replay (captures)", True),
+    Key("end,G", "follow", "follow the newest frame again", False, "End G"),
+    Key("slash,f", "filter", "display filter (e.g. dev == 1 and bus == can0)", True, "/ f"),
+    Key("ctrl+f", "search", "search: highlight matches; n/N move between them", False),
+    Key("n", "next_problem", "next search match, or next problem frame", False),
+    Key("N", "previous_problem", "previous search match, or previous problem frame", False),
+    Key("p", "pair", "jump to the paired request/response", True),
+    Key("t", "time_reference", "set/clear the time reference on this frame", False),
+    Key("T", "time_mode", "time column: relative, absolute, delta, reference", True),
+    Key("m", "set_mark", "mark this frame: m then a letter", False),
+    Key("apostrophe", "goto_mark", "jump to a mark: ' then a letter", False, "'"),
+    Key("ctrl+g", "goto", "go to a frame number or a time (t=12.5)", False),
+    Key("x", "arm_trigger", "arm/disarm the trigger (freeze on the first match)", False),
+    Key("plus,equals_sign", "faster", "replay faster (1x 2x 5x 10x max)", False, "+"),
+    Key("minus", "slower", "replay slower", False, "-"),
+    Key("e", "export", "export the shown (or marked a..b) records: JSONL, CSV, MCAP", True),
+    Key("1", "tab('devices')", "device panel", False),
+    Key("2", "tab('problems')", "problems panel (Enter jumps)", False),
+    Key("3", "tab('registers')", "register watch of the selected gripper", False),
+    Key("4", "tab('latency')", "latency per command", False),
+    Key("5", "tab('events')", "source events", False),
+    Key("tab", "focus_next", "next pane (frames, detail, hex, panels)", False),
+    Key("ctrl+t", "toggle_dark", "light/dark theme", False),
+    Key("ctrl+p", "command_palette", "command palette: every action", False),
+)
+
+LIST_KEYS: Final[tuple[tuple[str, str], ...]] = (
+    ("up/down, k/j", "move the cursor (stops following)"),
+    ("PgUp/PgDn, Home", "page, first frame"),
+    ("Enter (problems)", "jump to the first frame of that problem"),
+    ("left/right (hex)", "move the byte cursor: the field that holds it is selected"),
+)
+
+
+def bindings() -> list[BindingType]:
+    from textual.binding import Binding  # here: `eg2scope --help` must not load Textual
+
+    return [
+        Binding(
+            k.keys,
+            k.action,
+            k.description.split(":")[0].split(" (")[0],
+            show=k.footer,
+            id=f"eg2scope.{k.action.split('(')[0]}.{k.keys.split(',')[0]}",
+        )
+        for k in KEYS
+    ]
+
+
+def shown_keys(k: Key) -> str:
+    return k.shown or k.keys.replace(",", " ")
+
+
+def help_lines() -> list[tuple[str, str]]:
+    """(keys, what they do) for the help screen and ``--help``."""
+    return [(shown_keys(k), k.description) for k in KEYS] + list(LIST_KEYS)
+
+
+def help_text() -> str:
+    width = max(len(keys) for keys, _ in help_lines())
+    return "\n".join(f"  {keys:{width}}  {what}" for keys, what in help_lines())

@@ -1,0 +1,90 @@
+"""Every message the TUI's parts send each other, in one place."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from textual.message import Message
+
+from ..model import SourceEvent
+from .aggregates import DeviceKey, Snapshot
+from .spans import Span
+
+
+@dataclass
+class DeviceRow:
+    """One gripper's state as the session's tracker holds it (a copy)."""
+
+    bus: str
+    device: int
+    protocol: str
+    t: float | None
+    values: dict[str, Any]
+
+
+class FeedUpdate(Message):
+    """A batch from the session thread (10-20 a second, never one per record)."""
+
+    def __init__(
+        self,
+        count: int,
+        devices: list[DeviceRow],
+        changed: set[tuple[str, int, str]],
+        snapshot: Snapshot | None,
+        events: list[SourceEvent],
+        trigger: int | None,
+        captured: int,
+        dropped: int,
+        done: bool = False,
+    ) -> None:
+        super().__init__()
+        self.count = count  # records in the store
+        self.devices = devices
+        self.changed = changed  # (bus, device, field) set since the last update
+        self.snapshot = snapshot  # panels' tables (None: unchanged)
+        self.events = events
+        self.trigger = trigger  # store index of the record the trigger fired on
+        self.captured = captured  # chunks/frames captured so far
+        self.dropped = dropped
+        self.done = done  # the session has ended
+
+
+class RowSelected(Message):
+    """The frame list's cursor moved to store index ``index`` (None: nothing shown)."""
+
+    def __init__(self, index: int | None) -> None:
+        super().__init__()
+        self.index = index
+
+
+class JumpTo(Message):
+    """Show and select store index ``index`` (problems panel, marks, go-to, pair)."""
+
+    def __init__(self, index: int) -> None:
+        super().__init__()
+        self.index = index
+
+
+class FieldSelected(Message):
+    """A field of the detail tree was selected: highlight its bytes."""
+
+    def __init__(self, span: Span | None) -> None:
+        super().__init__()
+        self.span = span
+
+
+class ByteSelected(Message):
+    """A byte of the hex pane was selected: select the field that holds it."""
+
+    def __init__(self, offset: int) -> None:
+        super().__init__()
+        self.offset = offset
+
+
+class DeviceChosen(Message):
+    """A gripper was chosen in the device panel (the register watch follows it)."""
+
+    def __init__(self, key: DeviceKey) -> None:
+        super().__init__()
+        self.key = key

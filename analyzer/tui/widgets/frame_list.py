@@ -1,0 +1,270 @@
+"""The frame list: one line per record, as a Line-API virtual view (Toolong's way).
+
+Only the visible lines are rendered, each into a cached ``Strip``; the list holds no per-row
+widgets or objects, only the store and, when a filter is on, an ``array`` of the shown
+records' store indices. A million rows scroll as fast as a hundred.
+
+Follow: while following, the cursor sits on the newest shown record; moving the cursor or
+scrolling up stops following (the capture goes on), ``End``/``G`` resumes.
+"""
+
+from __future__ import annotations
+
+import re
+from array import array
+from bisect import bisect_left
+from typing import Any, ClassVar
+
+from rich.style import Style
+from textual import events
+from textual.binding import Binding, BindingType
+from textual.cache import LRUCache
+from textual.geometry import Size
+from textual.reactive import reactive
+from textual.scroll_view import ScrollView
+from textual.strip import Strip
+
+from ..filter import CompiledFilter
+from ..messages import RowSelected
+from ..rows import STYLE_MATCH, TimeMode, render_row
+from ..store import OK, RecordStore
+
+LINE_WIDTH = 160  # the virtual width: rows are cut to the pane, scrolled sideways beyond it
+
+
+class FrameList(ScrollView, can_focus=True):
+    """See the module doc."""
+
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("up,k", "cursor(-1)", "up", show=False),
+        Binding("down,j", "cursor(1)", "down", show=False),
+        Binding("pageup", "page(-1)", "page up", show=False),
+        Binding("pagedown", "page(1)", "page down", show=False),
+        Binding("home", "first", "first", show=False),
+        Binding("end,G", "follow", "follow", show=False),
+    ]
+    COMPONENT_CLASSES: ClassVar[set[str]] = {"frame-list--cursor"}
+    DEFAULT_CSS = """
+    FrameList { background: $surface; }
+    FrameList > .frame-list--cursor { background: $accent 40%; }
+    FrameList:focus > .frame-list--cursor { background: $accent 70%; }
+    """
+
+    follow: reactive[bool] = reactive(True)
+
+    def __init__(self, store: RecordStore, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.store = store
+        self.known = 0  # store records the list has taken in
+        self.view: array[int] | None = None  # shown store indices; None: all
+        self.filter: CompiledFilter | None = None
+        self.cursor = -1  # position in the shown rows
+        self.time_mode = TimeMode.RELATIVE
+        self.reference: int | None = None  # store index of the time reference
+        self.search: re.Pattern[str] | None = None
+        self.marks: dict[str, int] = {}  # letter -> store index
+        self.new_while_paused = 0
+        self._cache: LRUCache[tuple[Any, ...], Strip] = LRUCache(2048)
+        self._selected: int | None = None
+
+    # -- what is shown --------------------------------------------------------------------
+
+    @property
+    def row_count(self) -> int:
+        return len(self.view) if self.view is not None else self.known
+
+    def index_at(self, position: int) -> int:
+        """The store index of shown row ``position``."""
+        return self.view[position] if self.view is not None else position
+
+    def position_of(self, index: int) -> int | None:
+        """The shown row of store index ``index`` (None: filtered out)."""
+        if self.view is None:
+            return index if 0 <= index < self.known else None
+        pos = bisect_left(self.view, index)
+        return pos if pos < len(self.view) and self.view[pos] == index else None
+
+    def nearest_position(self, index: int) -> int:
+        if self.view is None:
+            return min(max(index, 0), self.known - 1)
+        return min(bisect_left(self.view, index), len(self.view) - 1)
+
+    @property
+    def selected(self) -> int | None:
+        """The store index under the cursor."""
+        if 0 <= self.cursor < self.row_count:
+            return self.index_at(self.cursor)
+        return None
+
+    # -- new records, filters ---------------------------------------------------------------
+
+    def take_new(self, count: int) -> None:
+        """The store now holds ``count`` records: show the new ones."""
+        old = self.known
+        if count <= old:
+            return
+        self.known = count
+        before = self.row_count
+        if self.view is not None and self.filter is not None:
+            self.view.extend(self.filter.indices(self.store, old, count))
+        added = self.row_count - (before if self.view is not None else old)
+        self._resize()
+        if self.follow:
+            self.move_to(self.row_count - 1, follow=True)
+        else:
+            self.new_while_paused += added
+        if self.time_mode is TimeMode.DELTA:
+            self.refresh()
+
+    def set_filter(self, compiled: CompiledFilter | None) -> None:
+        keep = self.selected
+        self.filter = compiled
+        self.view = (
+            None if compiled is None else array("q", compiled.indices(self.store, 0, self.known))
+        )
+        self._cache.clear()
+        self._resize()
+        if self.follow or keep is None:
+            self.move_to(self.row_count - 1, follow=self.follow)
+        else:
+            self.move_to(self.nearest_position(keep))
+        self.refresh()
+
+    def _resize(self) -> None:
+        self.virtual_size = Size(LINE_WIDTH, self.row_count)
+
+    def restyle(self) -> None:
+        """Forget the rendered lines (time mode, reference, search, marks or theme changed)."""
+        self._cache.clear()
+        self.refresh()
+
+    def notify_style_update(self) -> None:
+        super().notify_style_update()
+        self._cache.clear()
+
+    # -- the cursor -------------------------------------------------------------------------
+
+    def move_to(self, position: int, follow: bool = False) -> None:
+        """Put the cursor on shown row ``position`` and scroll it into view."""
+        n = self.row_count
+        position = min(max(position, 0), n - 1) if n else -1
+        self.follow = follow
+        if follow:
+            self.new_while_paused = 0
+        self.cursor = position
+        height = self.scrollable_content_region.height or 1
+        y = self.scroll_offset.y
+        if position >= 0 and not y <= position < y + height:
+            target = position - height + 1 if position >= y + height else position
+            if not follow:
+                target = max(0, position - height // 2)
+            self.scroll_to(y=target, animate=False, immediate=True)
+        self.refresh()
+        self._announce()
+
+    def jump_to_index(self, index: int) -> bool:
+        """Select store index ``index`` (stops following); False if the filter hides it."""
+        pos = self.position_of(index)
+        if pos is None:
+            return False
+        self.move_to(pos)
+        return True
+
+    def _announce(self) -> None:
+        selected = self.selected
+        if selected != self._selected:
+            self._selected = selected
+            self.post_message(RowSelected(selected))
+
+    def action_cursor(self, step: int) -> None:
+        self.move_to(self.cursor + step)
+
+    def action_page(self, step: int) -> None:
+        self.move_to(self.cursor + step * max(1, self.scrollable_content_region.height - 1))
+
+    def action_first(self) -> None:
+        self.move_to(0)
+
+    def action_follow(self) -> None:
+        self.move_to(self.row_count - 1, follow=True)
+
+    def on_mouse_scroll_up(self, event: events.MouseScrollUp) -> None:
+        self.follow = False
+
+    def on_click(self, event: events.Click) -> None:
+        offset = event.get_content_offset(self)
+        if offset is not None:
+            self.move_to(self.scroll_offset.y + offset.y)
+
+    # -- searching and problems -------------------------------------------------------------
+
+    def find(self, step: int, match: Any) -> bool:
+        """Move to the next (step 1) or previous (-1) shown row whose store index satisfies
+        ``match``; False if there is none."""
+        pos = self.cursor + step
+        n = self.row_count
+        index_at = self.index_at
+        while 0 <= pos < n:
+            if match(index_at(pos)):
+                self.move_to(pos)
+                return True
+            pos += step
+        return False
+
+    def search_matches(self, i: int) -> bool:
+        pattern = self.search
+        if pattern is None:
+            return False
+        store = self.store
+        return bool(pattern.search(store.summary[i]) or pattern.search(store.name_of(i)))
+
+    def is_problem(self, i: int) -> bool:
+        return self.store.severity[i] != OK or bool(
+            self.store.flags[i] & self.store.flag_bits.get("unanswered")
+        )
+
+    # -- rendering ----------------------------------------------------------------------------
+
+    def render_line(self, y: int) -> Strip:
+        scroll_x, scroll_y = self.scroll_offset
+        position = scroll_y + y
+        width = self.size.width
+        if not 0 <= position < self.row_count:
+            return Strip.blank(width, self.rich_style)
+        index = self.index_at(position)
+        previous = self.index_at(position - 1) if position > 0 else None
+        is_cursor = position == self.cursor
+        key = (index, previous if self.time_mode.value == "delta" else None, is_cursor)
+        strip = self._cache.get(key)
+        if strip is None:
+            strip = self._render_row(index, previous, is_cursor)
+            self._cache[key] = strip
+        return strip.crop_extend(scroll_x, scroll_x + width, None)
+
+    def _render_row(self, index: int, previous: int | None, is_cursor: bool) -> Strip:
+        store = self.store
+        reference = None if self.reference is None else store.time(self.reference)
+        mark = next((letter for letter, i in self.marks.items() if i == index), "")
+        text = render_row(
+            store,
+            index,
+            self.time_mode,
+            previous,
+            reference,
+            is_reference=index == self.reference,
+            mark=mark,
+        )
+        if self.search is not None:
+            text.highlight_regex(self.search, STYLE_MATCH)
+        text.stylize_before(self.rich_style)
+        if is_cursor:
+            cursor = self.get_component_rich_style("frame-list--cursor")
+            text.stylize(Style(bgcolor=cursor.bgcolor))
+        line = text.render(self.app.console)
+        strip = Strip(list(line), text.cell_len).extend_cell_length(
+            LINE_WIDTH,
+            Style(bgcolor=self.get_component_rich_style("frame-list--cursor").bgcolor)
+            if is_cursor
+            else None,
+        )
+        return strip

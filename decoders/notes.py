@@ -1,0 +1,34 @@
+"""The errors and warnings found while decoding one frame, each with its flag code.
+
+A decoder says what is wrong in words for people and in a code (``decoders/flags.py``) for
+programs; collecting both in one call keeps every text with its code.
+"""
+
+from __future__ import annotations
+
+
+class Notes:
+    """Errors, warnings and their flag codes, in the order they were found (codes once)."""
+
+    __slots__ = ("errors", "flags", "warnings")
+
+    def __init__(self) -> None:
+        self.errors: list[str] = []
+        self.warnings: list[str] = []
+        self.flags: list[str] = []
+
+    def error(self, code: str, text: str) -> None:
+        self.errors.append(text)
+        if code not in self.flags:
+            self.flags.append(code)
+
+    def warn(self, code: str, text: str) -> None:
+        self.warnings.append(text)
+        if code not in self.flags:
+            self.flags.append(code)
+
+    def flag(self, code: str) -> None:
+        """A code without words (the record says it otherwise, as an exception response
+        does in its summary)."""
+        if code not in self.flags:
+            self.flags.append(code)

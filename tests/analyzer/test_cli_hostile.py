@@ -1,0 +1,246 @@
+"""The command line as a hostile tester uses it: usage errors fail at once with exit 2, damaged
+input exits 3, no input is ever changed or destroyed, output errors name the file, Ctrl-C in a
+parallel decode is one clean line, and live streams carry their source events."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from decoders import build as b
+
+ROOT = Path(__file__).resolve().parents[2]
+CAPTURES = ROOT / "captures"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "NO_COLOR": "1"}
+
+
+def eg2scope(*args: str, timeout: float = 60, **kw: object) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "analyzer", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=ENV,
+        cwd=kw.pop("cwd", ROOT),  # type: ignore[arg-type]
+        **kw,  # type: ignore[call-overload]
+    )
+
+
+# -- usage errors: exit 2 at once ------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["decode", "captures/serial_session.bin", "--device", "-1"], "must be 0 or more"),
+        (["decode", "captures/serial_session.bin", "--jobs", "-3"], "must be 0 or more"),
+        (["decode", "captures/serial_session.bin", "--speed", "1e-300"], "replay speed"),
+        (["decode", "captures/serial_session.bin", "--speed", "1e400"], ""),
+        (["decode", "captures/serial_session.bin", "--speed", "-2"], "replay speed"),
+        (["decode", "captures/serial_session.bin", "--speed", "fast-ish"], "replay speed"),
+        (["decode", "captures/serial_session.bin", "-p", "can"], "CAN is chosen by the file"),
+        (["decode", "captures/serial_session.bin", "-p", "eg2-can"], "CAN is chosen by the file"),
+        (["stats", "captures/modbus_session.bin", "-p", "can"], "CAN is chosen by the file"),
+        (["decode", "captures/serial_session.bin", "-p", "nope"], "unknown protocol"),
+        (["live", "--serial", "/dev/null", "--queue-size", "-5"], "must be 1 or more"),
+        (["live", "--serial", "/dev/null", "--duration", "-1"], "positive number"),
+        (["demo", "--noise", "-1"], "probability"),
+        (["demo", "--noise", "1.5"], "probability"),
+    ],
+)
+def test_usage_errors_fail_at_once_with_exit_2(args: list[str], words: str) -> None:
+    start = time.monotonic()
+    res = eg2scope(*args, timeout=30)
+    if "1e400" in args:  # float('1e400') is inf: 'as fast as possible', like 'max'
+        assert res.returncode == 0, res.stderr
+        return
+    assert res.returncode == 2, (res.returncode, res.stderr)
+    assert words in res.stderr
+    assert "Traceback" not in res.stderr
+    assert time.monotonic() - start < 20
+
+
+# -- the user's files are never changed or destroyed -----------------------------------------
+
+
+@pytest.mark.parametrize("how", ["same", "symlink", "hardlink", "relative"])
+def test_output_naming_the_input_is_refused_and_the_input_kept(tmp_path: Path, how: str) -> None:
+    data = (CAPTURES / "serial_session.bin").read_bytes()
+    src = tmp_path / "self.bin"
+    src.write_bytes(data)
+    out = {
+        "same": src,
+        "symlink": tmp_path / "link.bin",
+        "hardlink": tmp_path / "hard.bin",
+        "relative": Path("self.bin"),
+    }[how]
+    if how == "symlink":
+        out.symlink_to(src)
+    elif how == "hardlink":
+        os.link(src, out)
+    res = eg2scope("decode", str(src), "-o", str(out), cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert "is the input" in res.stderr
+    assert src.read_bytes() == data
+
+
+def test_an_existing_output_is_not_truncated_when_the_run_cannot_start(tmp_path: Path) -> None:
+    out = tmp_path / "out.jsonl"
+    out.write_text("precious\n")
+    res = eg2scope("decode", str(tmp_path / "missing.bin"), "-f", "jsonl", "-o", str(out))
+    assert res.returncode == 1 and "not found" in res.stderr
+    assert out.read_text() == "precious\n"
+    res = eg2scope("decode", "captures/serial_session.bin", "-f", "jsonl", "-o", str(out))
+    assert res.returncode == 0
+    assert out.read_text().count("\n") == 27
+    assert not list(tmp_path.glob(".out.jsonl.*"))  # no temporary left behind
+
+
+def test_output_errors_name_the_file() -> None:
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full")
+    res = eg2scope("decode", "captures/can_pick_place.log", "-f", "jsonl", "-o", "/dev/full")
+    assert res.returncode == 1
+    assert "/dev/full" in res.stderr and "No space left" in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_stats_into_head_exits_quietly() -> None:
+    res = subprocess.run(
+        f"{sys.executable} -m analyzer stats captures/can_pick_place.log | head -1",
+        shell=True,
+        capture_output=True,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+        timeout=60,
+    )
+    assert res.returncode == 0
+    assert res.stdout.count("\n") == 1
+    assert res.stderr == ""
+
+
+# -- damaged input: exit 3, everything before the damage decoded -----------------------------
+
+
+def test_damaged_input_exits_3_after_decoding_what_is_there(tmp_path: Path) -> None:
+    log = (CAPTURES / "can_pick_place.log").read_bytes()
+    damaged = tmp_path / "cut.log.gz"
+    whole = gzip.compress(log)
+    damaged.write_bytes(whole[: len(whole) * 2 // 3])  # cut inside the compressed stream
+    res = eg2scope("decode", str(damaged), "-f", "jsonl")
+    assert res.returncode == 3, res.stderr
+    records = [json.loads(line) for line in res.stdout.splitlines()]
+    assert records and all(r["protocol"] in ("eg2-can", "can") for r in records)
+    assert str(damaged) in res.stderr
+    clean = eg2scope("decode", "captures/can_pick_place.log", "-f", "jsonl")
+    assert clean.returncode == 0 and clean.stderr == ""
+
+
+def test_help_documents_the_exit_codes() -> None:
+    for cmd in ([], ["decode"], ["stats"]):
+        res = eg2scope(*cmd, "--help")
+        assert "3 decoded as far as possible" in res.stdout.replace("\n", " ").replace("  ", " ")
+
+
+# -- parallel decoding ----------------------------------------------------------------------
+
+
+def _modbus_dump_with_a_request_waiting_across_a_boundary(path: Path) -> None:
+    """A Modbus dump whose read request sits just before the first part boundary (1 MiB) and
+    is followed by a run of garbage longer than the warm-up (64 KiB), then more traffic."""
+    request = b.modbus_read_request(1, 1061, 5)
+    response = b.modbus_read_response(1, [500, 0, 35, 0, 1])
+    pair = request + response
+    head = bytearray()
+    while len(head) < (1 << 20) - 40:
+        head += pair
+    head += request  # waits for an answer that never comes
+    # then another request (not a retransmission of the same one) and its answer, and more
+    other = b.modbus_read_request(1, 1061, 2) + b.modbus_read_response(1, [500, 0])
+    tail = bytearray()
+    while len(tail) < (2 << 20):
+        tail += other
+    path.write_bytes(bytes(head) + b"\x00" * 100_000 + bytes(tail))
+
+
+@pytest.mark.slow
+def test_parallel_output_equals_one_piece_when_state_crosses_a_boundary(tmp_path: Path) -> None:
+    dump = tmp_path / "modbus.bin"
+    _modbus_dump_with_a_request_waiting_across_a_boundary(dump)
+    one = eg2scope("decode", str(dump), "-p", "modbus", "-f", "jsonl", "-j", "1", timeout=300)
+    two = eg2scope("decode", str(dump), "-p", "modbus", "-f", "jsonl", "-j", "2", timeout=300)
+    assert one.returncode == two.returncode == 0
+    assert two.stdout == one.stdout
+    waiting = [json.loads(x) for x in one.stdout.splitlines() if "no response" in x]
+    assert waiting and "before the next request" in waiting[0]["warnings"][0]
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_a_parallel_decode_is_one_clean_line(tmp_path: Path) -> None:
+    dump = tmp_path / "big.bin"
+    frame = b.serial_frame(1, 0xD9) + b.serial_frame(1, 0xD9, b.u16le(500), response=True)
+    dump.write_bytes(frame * ((40 << 20) // len(frame)))
+    env = {**ENV, "TMPDIR": str(tmp_path)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "analyzer", "decode", str(dump), "-f", "jsonl", "-j", "2",
+         "-o", str(tmp_path / "out.jsonl")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT,
+        start_new_session=True,
+    )  # fmt: skip
+    time.sleep(2.5)
+    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "eg2scope: interrupted", err
+    assert not list(tmp_path.glob("eg2scope-*")) and not list(tmp_path.glob(".out.jsonl*"))
+    assert not (tmp_path / "out.jsonl").exists()
+
+
+# -- live streams --------------------------------------------------------------------------
+
+
+def test_live_jsonl_carries_source_events(tmp_path: Path) -> None:
+    res = eg2scope(
+        "live", "--serial", str(tmp_path / "ttyGone"), "-f", "jsonl", "--duration", "1.5"
+    )
+    assert res.returncode == 0, res.stderr
+    events = [json.loads(x) for x in res.stdout.splitlines()]
+    assert events and all(e["kind"] == "event" for e in events)
+    assert any("ttyGone" in e["message"] for e in events)
+    assert all(set(e) >= {"t", "bus", "event", "level", "message"} for e in events)
+
+
+def test_record_without_show_prints_events_as_they_happen(tmp_path: Path) -> None:
+    res = eg2scope(
+        "record", "--serial", str(tmp_path / "ttyGone"), "-o", str(tmp_path / "r.mcap"),
+        "--duration", "1.5",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "-- " in res.stderr and "ttyGone" in res.stderr  # the event line, on stderr
+    assert res.stdout == ""
+
+
+@pytest.mark.parametrize("sig", ["SIGHUP", "SIGTERM"])
+def test_a_closed_terminal_finishes_the_recording(tmp_path: Path, sig: str) -> None:
+    from analyzer.recording import McapCaptureReader
+
+    path = tmp_path / "demo.mcap"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "analyzer", "record", "--demo", "-o", str(path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, cwd=ROOT,
+    )  # fmt: skip
+    time.sleep(3)
+    proc.send_signal(getattr(signal, sig))
+    proc.communicate(timeout=30)
+    with McapCaptureReader(path) as reader:
+        items = list(reader)
+    assert items and not reader.errors  # finished: footer and index written

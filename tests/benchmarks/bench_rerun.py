@@ -1,0 +1,201 @@
+"""Rerun output under load (issue 9): a capture turned into an .rrd against decoding it alone,
+memory for a large capture, and a live session at 20,000 records/s.
+
+    python tests/benchmarks/bench_rerun.py [--frames 1000000] [--runs 3]
+                                           [--live-rate 20000] [--live-duration 60]
+                                           [--only capture|live]
+
+Capture: a candump log of realistic EG2 polling traffic (``traffic.can_frames``) is decoded by a
+child process running one session with no output ("decoding alone"), then plotted with
+``eg2scope plot FILE --save out.rrd``; CPU (user + system, all threads, from the child's rusage),
+wall time and peak RSS, median of ``--runs``. Targets: plot CPU at most 1.3x decoding alone; peak
+RSS under 300 MB at 1M records.
+
+Live: python-can's virtual bus does not cross processes, so a flooder thread sends request and
+response frames at ``--live-rate`` records/s while a live session (the real CanTap, the Rerun
+listener writing an .rrd as ``plot -i virtual`` does) decodes them in this process. Targets: no
+drops, every record decoded, and the viewer updated at least 10 times a second (the listener's
+flushes are counted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(HERE))
+
+from bench_record import flood_can  # noqa: E402
+from traffic import can_frames  # noqa: E402
+
+from analyzer.listener import Listener  # noqa: E402
+from analyzer.session import live_session  # noqa: E402
+from analyzer.sinks.rerun import RerunListener  # noqa: E402
+from analyzer.sources.can_tap import CanTap  # noqa: E402
+from analyzer.sources.live import wait_open  # noqa: E402
+
+MAX_RATIO = 1.3
+MAX_RSS_MB = 300
+MIN_UPDATES_PER_S = 10
+
+# one session, no output; with "states", the tracker also makes the state samples the Rerun
+# listener reads (their cost is the session's, shown apart)
+DECODE_ONLY = """
+import sys
+from analyzer.commands.common import CaptureOptions, run_capture
+from analyzer.listener import Listener
+class Null(Listener):
+    wants_states = sys.argv[2] == "states"
+    def on_records(self, records): pass
+run_capture(CaptureOptions(sys.argv[1], progress=False), [Null()])
+"""
+IMPORT_RERUN = "import rerun, rerun.blueprint"
+
+
+def write_candump(path: Path, n: int) -> None:
+    with path.open("w") as f:
+        for fr in can_frames(n):
+            f.write(f"({fr.t:.6f}) can0 {fr.arbitration_id:08X}#{fr.data.hex().upper()}\n")
+
+
+def run_child(cmd: list[str]) -> tuple[float, float, float]:
+    """(CPU s, wall s, peak RSS MB) of a child process."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=ROOT)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    if os.waitstatus_to_exitcode(status) != 0:
+        assert proc.stderr is not None
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{proc.stderr.read().decode()}")
+    return usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024
+
+
+def bench_capture(frames: int, runs: int, tmp: Path) -> bool:
+    log = tmp / "bench.log"
+    write_candump(log, frames)
+    cases = {
+        "decoding alone": [sys.executable, "-c", DECODE_ONLY, str(log), "records"],
+        "+ state samples": [sys.executable, "-c", DECODE_ONLY, str(log), "states"],
+        "import rerun": [sys.executable, "-c", IMPORT_RERUN],
+        "plot --save .rrd": [
+            sys.executable, "-m", "analyzer", "plot", str(log), "--save", str(tmp / "out.rrd"),
+            "--no-progress",
+        ],
+    }  # fmt: skip
+    results: dict[str, tuple[float, float, float]] = {}
+    print(f"capture: {frames:,} CAN records (candump log, {log.stat().st_size / 1e6:.0f} MB), "
+          f"median of {runs} runs")  # fmt: skip
+    for name, cmd in cases.items():
+        samples = [run_child(cmd) for _ in range(runs)]
+        cpu, wall, rss = (statistics.median(s[i] for s in samples) for i in range(3))
+        results[name] = (cpu, wall, rss)
+        print(f"  {name:18} CPU {cpu:6.2f} s  wall {wall:6.2f} s  peak RSS {rss:5.0f} MB  "
+              f"({frames / wall:,.0f} records/s)")  # fmt: skip
+    base, plot = results["decoding alone"], results["plot --save .rrd"]
+    samples, imported = results["+ state samples"], results["import rerun"]
+    ratio_cpu, ratio_wall = plot[0] / base[0], plot[1] / base[1]
+    size = (tmp / "out.rrd").stat().st_size / 1e6
+    print(f"  of plot's extra CPU: state samples {samples[0] - base[0]:.2f} s, importing rerun "
+          f"{imported[0]:.2f} s, the listener and Rerun's writer the rest")  # fmt: skip
+    ok = ratio_cpu <= MAX_RATIO and plot[2] < MAX_RSS_MB
+    print(f"  plot / decoding alone: CPU x{ratio_cpu:.2f}, wall x{ratio_wall:.2f} "
+          f"(target <= x{MAX_RATIO}); .rrd {size:.0f} MB; peak RSS {plot[2]:.0f} MB "
+          f"(target < {MAX_RSS_MB}) -> {'ok' if ok else 'MISSED'}")  # fmt: skip
+    return ok
+
+
+class NullStates(Listener):
+    """Decoding and state samples, no output: the live baseline."""
+
+    wants_states = True
+
+    def on_records(self, records: list[Any]) -> None:
+        pass
+
+    def flush(self, final: bool = False) -> None:
+        pass
+
+
+def bench_live(rate: int, duration: float, tmp: Path, rerun: bool = True) -> bool:
+    """``rate`` records/s: requests and responses, half each (``rate`` frames/s)."""
+    channel = f"bench-rerun-{os.getpid()}-{time.monotonic_ns()}"
+    listener: Any = RerunListener(str(tmp / "live.rrd"), live=True) if rerun else NullStates()
+    flushes: list[float] = []
+    flush = listener.flush
+
+    def counted_flush(final: bool = False) -> None:
+        flushes.append(time.monotonic())
+        flush(final)
+
+    listener.flush = counted_flush
+    session = live_session([CanTap("can0", "virtual", channel)], [listener])
+    flood: dict = {}
+    sender = threading.Thread(target=flood_can, args=(channel, rate, duration, flood))
+
+    def start_flood() -> None:
+        wait_open(session.source.taps)
+        sender.start()
+
+    session.source.on_started = start_flood
+    cpu0 = time.process_time()
+    runner = threading.Thread(target=session.run)
+    runner.start()
+    time.sleep(0.5)
+    sender.join()
+    time.sleep(1.0)  # the last batch
+    session.stop()
+    runner.join()
+    cpu = time.process_time() - cpu0 - flood.get("cpu", 0.0)
+    counts = session.counts
+    during = flushes[:-1]  # the last one is the final flush at close
+    gaps = [b - a for a, b in itertools.pairwise(during)]
+    per_s = len(during) / max(during[-1] - during[0], 1e-9) if len(during) > 1 else 0.0
+    kept = counts.dropped == 0 and counts.records >= flood["sent"]
+    what = "Rerun listener" if rerun else "baseline, no output"
+    sent = flood["sent"]
+    print(f"live ({what}): {sent:,} records sent in {duration:.0f} s "
+          f"({sent / duration:,.0f}/s of {rate:,}/s asked) on the virtual CAN bus")  # fmt: skip
+    print(f"  decoded {counts.records:,}, dropped {counts.dropped:,}; session CPU "
+          f"{cpu / duration * 100:.0f}% of a core; peak RSS "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")  # fmt: skip
+    if not rerun:
+        return kept
+    ok = kept and per_s >= MIN_UPDATES_PER_S
+    print(f"  viewer updated {per_s:.1f} times/s (longest gap {max(gaps, default=0) * 1000:.0f} "
+          f"ms) -> {'ok' if ok else 'MISSED'}")  # fmt: skip
+    return ok
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--frames", type=int, default=1_000_000)
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--live-rate", type=int, default=20_000)
+    ap.add_argument("--live-duration", type=float, default=60.0)
+    ap.add_argument("--only", choices=("capture", "live"))
+    args = ap.parse_args()
+    ok = True
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.only in (None, "capture"):
+            ok &= bench_capture(args.frames, args.runs, Path(tmp))
+        if args.only in (None, "live"):
+            bench_live(args.live_rate, args.live_duration, Path(tmp), rerun=False)
+            ok &= bench_live(args.live_rate, args.live_duration, Path(tmp))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
