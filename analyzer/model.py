@@ -94,12 +94,25 @@ class StateSample:
         return d
 
 
+# derived() runs once per state sample a recording writes: look the common values up
+_MM: Final = [opening_mm(v) for v in range(1001)]
+_STATE_WORDS: Final = [state_text(v) for v in range(256)]
+
+
+def _mm(value: Any) -> float | None:
+    if value is None:
+        return None
+    return _MM[value] if 0 <= value <= 1000 else opening_mm(value)
+
+
 def derived(d: dict[str, Any]) -> dict[str, Any]:
     """Add the fields a person reads to a state's values: millimetres and words."""
-    opening, target = d.get("opening"), d.get("target_opening")
     state, fault = d.get("state"), d.get("fault")
-    d["opening_mm"] = None if opening is None else opening_mm(opening)
-    d["target_mm"] = None if target is None else opening_mm(target)
-    d["state_text"] = None if state is None else state_text(state)
-    d["fault_text"] = [] if fault is None else fault_text(fault)
+    d["opening_mm"] = _mm(d.get("opening"))
+    d["target_mm"] = _mm(d.get("target_opening"))
+    if state is None:
+        d["state_text"] = None
+    else:
+        d["state_text"] = _STATE_WORDS[state] if 0 <= state < 256 else state_text(state)
+    d["fault_text"] = fault_text(fault) if fault else []
     return d

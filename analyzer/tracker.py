@@ -139,30 +139,34 @@ class Tracker:
         return [s for s in map(update, records) if s is not None]
 
 
-def _set(changed: dict[str, Any], name: str, value: Any, request: bool) -> None:
-    """A register value into the state, unless it is out of range or a request writes a
-    read-only register (that is flagged on the record, and the gripper ignores it)."""
-    attr = REGISTER_FIELDS.get(name)
-    if attr is None:
-        return
-    reg = BY_NAME.get(name)
-    if reg is not None:
-        if request and reg.access == "ro":
-            return
-        if isinstance(value, int) and reg.range_warning(value):
-            return
-    changed[attr] = value
+# register name -> (state field, lowest, highest, read-only), for the fold's inner loop
+_FOLD: Final[dict[str, tuple[str, int | None, int | None, bool]]] = {
+    name: (attr, BY_NAME[name].lo, BY_NAME[name].hi, BY_NAME[name].access == "ro")
+    for name, attr in REGISTER_FIELDS.items()
+}
 
 
 def _registers(rec: Record, changed: dict[str, Any]) -> None:
+    """Register values into the state, unless out of range or a request writes a read-only
+    register (both are flagged on the record, and the gripper ignores such a write)."""
     f = rec.fields
     request = rec.direction == REQUEST
     values = f.get("values")
-    if isinstance(values, dict):
-        for name, value in values.items():
-            _set(changed, name, value, request)
-    elif request and "value" in f and isinstance(f.get("name"), str):
-        _set(changed, f["name"], f["value"], request)
+    if not isinstance(values, dict):
+        if not (request and "value" in f and isinstance(f.get("name"), str)):
+            return
+        values = {f["name"]: f["value"]}
+    fold = _FOLD.get
+    for name, value in values.items():
+        spec = fold(name)
+        if spec is None:
+            continue
+        attr, lo, hi, read_only = spec
+        if request and read_only:
+            continue
+        if lo is not None and hi is not None and isinstance(value, int) and not lo <= value <= hi:
+            continue
+        changed[attr] = value
 
 
 def _catch(f: dict[str, Any], changed: dict[str, Any], continuous: bool) -> None:

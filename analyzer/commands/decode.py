@@ -5,12 +5,9 @@ from __future__ import annotations
 import argparse
 from typing import IO, Any
 
-from ..listener import Listener
+from ..listener import Listener, make_listener
 from ..outfile import OutputError, check_not_input, output_stream
 from ..session import Session
-from ..sinks.csv import CsvListener
-from ..sinks.jsonl import JsonlListener
-from ..sinks.text import TextListener
 from .common import (
     CaptureOptions,
     add_input_arguments,
@@ -87,14 +84,13 @@ def add_subparser(sub: Any) -> None:
 
 
 def make_output(args: argparse.Namespace, out: IO[Any]) -> Listener:
-    if args.format == "jsonl":
-        return JsonlListener(out)
-    if args.format == "csv":
-        return CsvListener(out)
+    """The output listener of ``--format``, found by name in the listener registry."""
+    if args.format != "text":
+        return make_listener(args.format, out)
     colour = {"always": True, "never": False}.get(args.colour)
     if args.output and colour is None:
         colour = False
-    return TextListener(out, colour=colour, absolute_time=args.absolute_time)
+    return make_listener("text", out, colour=colour, absolute_time=args.absolute_time)
 
 
 def run(args: argparse.Namespace) -> int:

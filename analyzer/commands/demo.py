@@ -6,7 +6,6 @@ import argparse
 import sys
 from typing import Any
 
-from ..errors import UsageError
 from ..listener import Listener
 from ..sim.rig import BUSES, DemoRig
 from .common import probability
@@ -33,11 +32,23 @@ def add_subparser(sub: Any) -> None:
     parser.set_defaults(func=run, protocol="auto")
 
 
+def bus_list(text: str) -> tuple[str, ...]:
+    """argparse type: the demo's buses, comma separated."""
+    buses = tuple(b.strip() for b in text.split(",") if b.strip())
+    unknown = sorted(set(buses) - set(BUSES))
+    if unknown or not buses:
+        raise argparse.ArgumentTypeError(
+            f"unknown demo bus {', '.join(unknown) or repr(text)}; choose from {', '.join(BUSES)}"
+        )
+    return buses
+
+
 def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("demo (simulated grippers)")
     group.add_argument(
         "--buses",
-        default=",".join(BUSES),
+        type=bus_list,
+        default=BUSES,
         metavar="LIST",
         help="buses to simulate, comma separated (default: serial,modbus,can)",
     )
@@ -54,12 +65,7 @@ def run_demo(
     args: argparse.Namespace, show: str | None, extra: list[Listener] | None = None
 ) -> int:
     """The simulated grippers through one live session (``extra``: more listeners)."""
-    buses = tuple(b.strip() for b in args.buses.split(",") if b.strip())
-    try:
-        rig = DemoRig(buses, noise=args.noise)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    with rig:
+    with DemoRig(args.buses, noise=args.noise) as rig:
         print(
             f"eg2scope {args.command}: simulated grippers 1 and 2 on "
             + ", ".join(f"{t.bus} ({type(t).__name__})" for t in rig.taps)

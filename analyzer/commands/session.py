@@ -16,8 +16,7 @@ from ..errors import UsageError
 from ..listener import Listener, make_listener
 from ..model import SourceEvent
 from ..session import Session, SessionOptions
-from ..sinks.jsonl import JsonlListener
-from ..sinks.text import TextListener, format_event, use_colour
+from ..sinks.text import format_event, use_colour
 from ..sources.live import Tap
 from ..sources.source import LiveSource
 from .common import exit_code, positive_float, positive_int
@@ -138,10 +137,10 @@ def run_session(
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     listeners: list[Listener] = list(extra or [])
-    if show == "text":
-        listeners.append(TextListener(sys.stdout, t0=time.time()))
-    elif show == "jsonl":
-        listeners.append(JsonlListener(sys.stdout.buffer))
+    if show == "text":  # live: time counts from the session's start
+        listeners.append(make_listener("text", sys.stdout, t0=time.time()))
+    elif show is not None:
+        listeners.append(make_listener(show, sys.stdout.buffer))
     if args.output:
         listeners.append(recorder(args.output, taps))
     from ..rerun_target import rerun_listener

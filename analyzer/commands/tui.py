@@ -142,8 +142,7 @@ def run(args: argparse.Namespace) -> int:
         if args.demo:
             from ..sim.rig import DemoRig
 
-            buses = tuple(b.strip() for b in args.buses.split(",") if b.strip())
-            rig = stack.enter_context(DemoRig(buses, noise=args.noise))
+            rig = stack.enter_context(DemoRig(args.buses, noise=args.noise))
             plan = live_plan(args, rig.taps, rig.protocols, rig.run_hosts)
         elif args.file:
             plan = capture_plan(args, stack)
