@@ -47,10 +47,15 @@ class Pairer:
         save_timeout_s: float = 2.0,
         max_held: int = 10_000,
         positional: bool = False,
+        max_held_bytes: int = 64 << 10,
     ) -> None:
         self.timeout_s = timeout_s  # response time-out (clients use 20-30 ms; be generous)
         self.save_timeout_s = save_timeout_s  # a save pauses the gripper ~850 ms
         self.max_held = max_held
+        # and in input bytes: a request never answered in a long run of garbage must not hold
+        # megabytes of records (64 KiB is seconds of a saturated serial line)
+        self.max_held_bytes = max_held_bytes
+        self._held_bytes = 0
         # positional: seq is the record's place in its input (offset, or CAN frame index), so
         # a capture decoded in parallel parts numbers its records the same as in one piece
         self.positional = positional
@@ -85,11 +90,16 @@ class Pairer:
             held.append(rec)
             out = list(held)
             held.clear()
+            self._held_bytes = 0
             return out
         held.append(rec)
-        if id(held[0]) in self._waiting:
-            return [] if len(held) <= self.max_held else self._release()
+        self._held_bytes += rec.length
+        if id(held[0]) in self._waiting and not self._over_limit():
+            return []
         return self._release()
+
+    def _over_limit(self) -> bool:
+        return len(self._held) > self.max_held or self._held_bytes > self.max_held_bytes
 
     def push_many(self, records: Iterable[Record]) -> list[Record]:
         out: list[Record] = []
@@ -110,6 +120,7 @@ class Pairer:
             self._close(key, "no response before the end of the capture")
         out = list(self._held)
         self._held.clear()
+        self._held_bytes = 0
         return out
 
     def gap(self, bus: str) -> list[Record]:
@@ -213,8 +224,12 @@ class Pairer:
         waiting = self._waiting
         out: list[Record] = []
         while held and id(held[0]) not in waiting:
-            out.append(held.popleft())
-        if len(held) > self.max_held:
+            rec = held.popleft()
+            self._held_bytes -= rec.length
+            out.append(rec)
+        if not held:
+            self._held_bytes = 0
+        elif self._over_limit():
             # bound memory: give up on the oldest request rather than hold the stream
             head = held[0]
             for key, requests in list(self._pending.items()):

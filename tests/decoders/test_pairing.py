@@ -21,6 +21,7 @@ from decoders.model import (
     EG2_CAN,
     EG2_SERIAL,
     FRAME,
+    GARBAGE,
     MODBUS_RTU,
     REQUEST,
     RESPONSE,
@@ -158,6 +159,19 @@ def test_held_records_are_bounded() -> None:
     assert len(out) >= 50  # released without waiting for the end of the stream
     assert "pairing window" in out[0].warnings[0]
     assert out[0].flags == [UNANSWERED]
+
+
+def test_held_bytes_are_bounded_behind_a_request_lost_in_garbage() -> None:
+    """A valid-looking request in a random dump, never answered nor followed by another: the
+    garbage behind it is released once 64 KiB are held, not at the end of the capture."""
+    p = Pairer()
+    out = p.push(rec(REQUEST, 1, code=1))
+    for i in range(100):
+        g = Record(None, "serial", EG2_SERIAL, GARBAGE, 4096, bytes(4096), offset=i * 4096)
+        out += p.push(g)
+        assert sum(r.length for r in p._held) <= 64 * 1024 + 4096
+    assert len(out) >= 80
+    assert "pairing window" in out[0].warnings[0] and out[0].flags == [UNANSWERED]
 
 
 def test_corrupt_frames_are_not_paired() -> None:
