@@ -34,7 +34,9 @@ from ..rerun_target import RerunOutput, RerunTarget, parse_target
 from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches
 
 NAN: Final = float("nan")  # no timestamp
-LIVE_FLUSH_S: Final = 0.1  # a live viewer is updated ten times a second
+# a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
+# (12.5 a second) because they happen at the session's ticks, a step late at worst
+LIVE_FLUSH_S: Final = 0.08
 CAPTURE_FLUSH_S: Final = 2.0  # a capture read at full speed: few, large chunks
 LAYOUT_EVERY_S: Final = 1.0  # the blueprint is sent again at most this often
 MAX_ROWS: Final = 250_000  # records and samples waiting before a flush, whatever the time
@@ -246,7 +248,7 @@ class RerunListener(Listener):
         self._timed = self._untimed = False  # rows with and without capture_time were sent
         self._sent_layout: Layout | None = self.layout if live else None
         self._pending = 0
-        self._last_flush = time.monotonic()
+        self._next_flush = time.monotonic() + self.flush_interval  # when a flush is due
         self._marked: set[tuple[str, int]] = set()  # (bus, seq) marked in this batch
         self._batches = Batches()
         self._next_layout = 0.0  # when the blueprint may be sent again
@@ -336,9 +338,8 @@ class RerunListener(Listener):
         columns.add(event.t, None, event.message, level)
 
     def tick(self, now: float) -> None:
-        mono = time.monotonic()
         if self._pending >= self.max_rows or (
-            self._pending and mono - self._last_flush >= self.flush_interval
+            self._pending and time.monotonic() >= self._next_flush
         ):
             self.flush()
 
@@ -360,7 +361,7 @@ class RerunListener(Listener):
 
     def flush(self, final: bool = False) -> None:
         """Send every buffered column, then the layout if a gripper or bus appeared."""
-        self._last_flush = time.monotonic()  # the period counts from the start of a flush
+        self._schedule(time.monotonic())
         for g in self.grippers.values():
             forces = g.by_field["force"].values
             if forces:
@@ -385,6 +386,15 @@ class RerunListener(Listener):
             self.output.show(blueprint(self.layout))
             self._sent_layout = self.layout
             self._next_layout = mono + LAYOUT_EVERY_S
+
+    def _schedule(self, now: float) -> None:
+        """The next flush is due one interval after the one due now (a fixed cadence: a late
+        tick does not delay the next), or one interval from now after a missed interval. A
+        flush before its time (too many rows waiting) leaves the cadence as it is."""
+        if now < self._next_flush:
+            return
+        due = self._next_flush + self.flush_interval
+        self._next_flush = due if due > now else now + self.flush_interval
 
     def _send(self, c: _Columns) -> None:
         """The rows of ``c`` as one chunk (two when only some rows have a timestamp)."""

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 Batch = list[Item | SourceEvent]
 
 LIVE_BATCH_S = 0.05  # live: decode and show 20 times a second
+LIVE_BATCH_ITEMS = 2000  # and after a backlog, in steps short enough to keep views refreshed
 CAPTURE_BATCH_ITEMS = 2048  # captures: CAN frames (or byte chunks) per batch
 CAPTURE_BATCH_BYTES = 1 << 16  # ... or this many bytes of chunks
 
@@ -72,7 +73,7 @@ class LiveSource(Source):
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
         get = self.queue.get_batch
         while not stop.is_set():
-            batch = get(LIVE_BATCH_S)
+            batch = get(LIVE_BATCH_S, LIVE_BATCH_ITEMS)
             drops = self._drops()
             if drops is not None:
                 batch.append(drops)

@@ -5,8 +5,10 @@ gripper, and every register seen per gripper. ``snapshot()`` copies them for the
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections import deque
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any, Final
 
 from decoders import flags as F
@@ -70,9 +72,11 @@ def latency_stats(values: deque[float] | list[float]) -> LatencyStats | None:
     ordered = sorted(values)
     n = len(ordered)
     top = ordered[-1]
-    bins = [0] * HISTOGRAM_BINS
-    for v in ordered:
-        bins[min(HISTOGRAM_BINS - 1, int(v / top * HISTOGRAM_BINS)) if top > 0 else 0] += 1
+    if top > 0:  # bin k holds values in [k, k+1) * top / BINS, the last one top too
+        edges = [bisect_left(ordered, top * k / HISTOGRAM_BINS) for k in range(1, HISTOGRAM_BINS)]
+        bins = [b - a for a, b in pairwise([0, *edges, n])]
+    else:
+        bins = [n] + [0] * (HISTOGRAM_BINS - 1)
     return LatencyStats(n, ordered[n // 2], ordered[min(n - 1, int(n * 0.95))], top, bins)
 
 
@@ -84,6 +88,11 @@ class Aggregates:
         self.latency_command: dict[str, deque[float]] = {}
         self.latency_device: dict[DeviceKey, deque[float]] = {}
         self.registers: dict[DeviceKey, dict[str, RegisterSeen]] = {}
+        # percentiles sort up to LATENCY_KEEP values: redone only for the keys that got new ones
+        self.stats_command: dict[str, LatencyStats] = {}
+        self.stats_device: dict[DeviceKey, LatencyStats] = {}
+        self._dirty_command: set[str] = set()
+        self._dirty_device: set[DeviceKey] = set()
 
     def add(self, records: list[Record], first_index: int) -> None:
         for k, rec in enumerate(records):
@@ -93,8 +102,11 @@ class Aggregates:
                 continue
             key = (rec.bus, rec.device)
             if rec.latency_ms is not None and rec.direction == RESPONSE:
-                self._latency(self.latency_command, rec.name or "?", rec.latency_ms)
+                name = rec.name or "?"
+                self._latency(self.latency_command, name, rec.latency_ms)
                 self._latency(self.latency_device, key, rec.latency_ms)
+                self._dirty_command.add(name)
+                self._dirty_device.add(key)
             self._registers(rec, key)
 
     def _problems(self, rec: Record, index: int) -> None:
@@ -144,7 +156,7 @@ class Aggregates:
             reg.count += 1
             reg.last_t = rec.t if rec.t is not None else reg.last_t
 
-    def snapshot(self, with_latency: bool) -> Snapshot:
+    def snapshot(self) -> Snapshot:
         snap = Snapshot(
             problems=[ProblemGroup(**vars(g)) for g in self.problems.values()],
             registers={
@@ -152,13 +164,18 @@ class Aggregates:
                 for k, table in self.registers.items()
             },
         )
-        if with_latency:
-            for name, values in self.latency_command.items():
-                stats = latency_stats(values)
-                if stats is not None:
-                    snap.latency_by_command[name] = stats
-            for key, values in self.latency_device.items():
-                stats = latency_stats(values)
-                if stats is not None:
-                    snap.latency_by_device[key] = stats
+        self._update_stats(self.latency_command, self.stats_command, self._dirty_command)
+        self._update_stats(self.latency_device, self.stats_device, self._dirty_device)
+        snap.latency_by_command = dict(self.stats_command)
+        snap.latency_by_device = dict(self.stats_device)
         return snap
+
+    @staticmethod
+    def _update_stats(
+        values: dict[Any, deque[float]], stats: dict[Any, LatencyStats], dirty: set[Any]
+    ) -> None:
+        for key in dirty:
+            found = latency_stats(values[key])
+            if found is not None:
+                stats[key] = found
+        dirty.clear()

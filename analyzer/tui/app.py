@@ -43,6 +43,7 @@ from .widgets.problems import ProblemsPanel
 from .widgets.registers import RegisterWatch
 
 DETAIL_S = 0.08  # the detail pane follows the cursor at most this often
+DETAIL_FOLLOW_S = 0.5  # ... and the newest record, while following, at most this often
 
 
 @dataclass
@@ -251,14 +252,17 @@ class Eg2ScopeApp(App[int]):
 
     @on(RowSelected)
     def row_selected(self, event: RowSelected) -> None:
-        # at most DETAIL_S apart: following a fast bus must not rebuild the tree per batch
+        # following a fast bus must not rebuild the tree per batch: it costs the session's
+        # thread the GIL while a capture decodes
         self._detail_due = event.index
         if self._detail_timer is None:
-            self._detail_timer = self.set_timer(DETAIL_S, self._apply_detail)
+            delay = DETAIL_FOLLOW_S if self.frames.follow else DETAIL_S
+            self._detail_timer = self.set_timer(delay, self._apply_detail)
 
     def _apply_detail(self) -> None:
         self._detail_timer = None
-        self._show_detail(self._detail_due)
+        if self.screen_stack:  # the timer can outlive the screens when the app quits
+            self._show_detail(self._detail_due)
 
     def _show_detail(self, index: int | None) -> None:
         tree = self.main_screen.query_one(DetailTree)

@@ -23,8 +23,8 @@ from .aggregates import Aggregates
 from .messages import DeviceRow, FeedUpdate
 from .store import RecordStore
 
-POST_INTERVAL_S: Final = 0.075  # about 13 updates a second
-PANELS_INTERVAL_S: Final = 0.5  # latency percentiles are recomputed this often
+POST_INTERVAL_S: Final = 0.1  # 10 updates a second
+PANELS_INTERVAL_S: Final = 0.5  # the panels' tables (problems, registers, latency) this often
 
 TRIGGERS: Final[dict[str, Callable[[Record], bool]]] = {
     "error": lambda r: bool(r.errors),
@@ -151,7 +151,7 @@ class TuiFeed(Listener):
             count=self.store.count,
             devices=self._devices(),
             changed=self._changed,
-            snapshot=self.aggregates.snapshot(with_latency=panels),
+            snapshot=self.aggregates.snapshot() if panels else None,
             events=self._events,
             trigger=self._fired,
             captured=captured,

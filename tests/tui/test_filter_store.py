@@ -8,6 +8,7 @@ from conftest import CAPTURES
 
 from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.listener import Listener
+from analyzer.tui.aggregates import HISTOGRAM_BINS, Aggregates, latency_stats
 from analyzer.tui.export import raw_item
 from analyzer.tui.filter import FilterError, parse
 from analyzer.tui.spans import span_at, spans
@@ -133,3 +134,36 @@ def test_an_exported_record_rebuilds_its_raw_input(records: list[Record]) -> Non
     for rec in records:
         item = raw_item(rec)
         assert item.payload.data == rec.raw and item.bus == rec.bus
+
+
+@pytest.mark.parametrize(
+    "values",
+    [[0.0], [0.0, 0.0], [1.0], [0.1, 0.2, 0.3, 0.4], [0.5] * 9 + [4.0], [i / 7 for i in range(50)]],
+)
+def test_latency_histogram_counts_each_value_in_its_bin(values: list[float]) -> None:
+    stats = latency_stats(values)
+    assert stats is not None
+    top = max(values)
+    expected = [0] * HISTOGRAM_BINS
+    for v in values:
+        expected[min(HISTOGRAM_BINS - 1, int(v / top * HISTOGRAM_BINS)) if top else 0] += 1
+    assert stats.histogram == expected
+    assert (stats.count, stats.max) == (len(values), top)
+
+
+def test_latency_panels_follow_batches_split_anywhere(records: list[Record]) -> None:
+    # percentiles are redone only for the keys a batch touched: the result must not depend
+    # on how the records were batched, nor on how often the panels asked
+    whole = Aggregates()
+    whole.add(records, 0)
+    expected = whole.snapshot()
+    pieces = Aggregates()
+    for k in range(0, len(records), 5):
+        pieces.add(records[k : k + 5], k)
+        if k % 15 == 0:
+            pieces.snapshot()
+    got = pieces.snapshot()
+    assert expected.latency_by_command  # the captures hold answered requests
+    assert got.latency_by_command == expected.latency_by_command
+    assert got.latency_by_device == expected.latency_by_device
+    assert [vars(g) for g in got.problems] == [vars(g) for g in expected.problems]

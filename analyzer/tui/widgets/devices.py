@@ -10,9 +10,10 @@ import time
 from collections.abc import Callable
 from typing import Any, Final
 
-from rich.table import Table
 from rich.text import Text
-from textual.widgets import Static
+from textual.geometry import Size
+from textual.scroll_view import ScrollView
+from textual.strip import Strip
 
 from ...model import derived
 from ..aggregates import DeviceKey, LatencyStats
@@ -55,18 +56,43 @@ def changed_style(since: float | None) -> str:
     return "green"
 
 
-class DevicePanel(Static):
-    """See the module doc. ``clock``: the time ages are measured against (the wall clock
-    live, the newest record's time in a capture)."""
+# (heading, width): fixed widths, so a redraw is one pass of string formatting (a rich Table
+# measures every cell of every row on each redraw, which starved the session's thread)
+COLUMNS: Final = (
+    ("bus", 6), ("ID", 5), ("opening", 23), ("force", 5), ("current", 7), ("°C", 4),
+    ("state", 12), ("fault", 14), ("target", 15), ("speed", 5), ("f.limit", 7),
+    ("last command", 16), ("frames", 8), ("err", 5), ("unans", 5), ("p50/p95 ms", 11),
+    ("age", 10),
+)  # fmt: skip
+LINE_WIDTH: Final = sum(width + 1 for _, width in COLUMNS)
 
-    DEFAULT_CSS = "DevicePanel { height: auto; }"
+
+def table_line(cells: list[Any], bold: bool = False) -> Text:
+    """Cells (text or ``Text``) side by side in ``COLUMNS``' widths, cut with an ellipsis."""
+    line = Text(no_wrap=True, style="bold" if bold else "")
+    for cell, (_, width) in zip(cells, COLUMNS, strict=True):
+        part = cell if isinstance(cell, Text) else Text(str(cell))
+        part.truncate(width, overflow="ellipsis", pad=True)
+        line.append_text(part)
+        line.append(" ")
+    return line
+
+
+class DevicePanel(ScrollView):
+    """See the module doc. ``clock``: the time ages are measured against (the wall clock
+    live, the newest record's time in a capture). Lines are drawn on ``redraw()`` into
+    strips, and ``render_line`` only hands them out (the Line API: no layout pass)."""
+
+    DEFAULT_CSS = "DevicePanel { height: 1fr; }"
 
     def __init__(self, clock: Callable[[], float | None], **kwargs: Any) -> None:
-        super().__init__("no gripper heard yet", **kwargs)
+        super().__init__(**kwargs)
         self.clock = clock
         self.rows: list[DeviceRow] = []
         self.latency: dict[DeviceKey, LatencyStats] = {}
         self.changed_at: dict[tuple[str, int, str], float] = {}
+        self.lines: list[Text] = [Text("no gripper heard yet")]
+        self._strips: list[Strip] | None = None
 
     def take(self, rows: list[DeviceRow], changed: set[tuple[str, int, str]]) -> None:
         now = time.monotonic()
@@ -77,20 +103,32 @@ class DevicePanel(Static):
     def redraw(self) -> None:
         if not self.rows:
             return
-        self.update(self.table())
+        clock, mono = self.clock(), time.monotonic()
+        self.lines = [table_line([name for name, _ in COLUMNS], bold=True)]
+        self.lines += [table_line(self._cells(row, clock, mono)) for row in self.rows]
+        self._strips = None
+        self.virtual_size = Size(LINE_WIDTH, len(self.lines))
+        self.refresh()
 
-    def table(self) -> Table:
-        table = Table(expand=True, box=None, padding=(0, 1), header_style="bold")
-        for name in (
-            "bus", "ID", "opening", "force", "current", "°C", "state", "fault", "target",
-            "speed", "f.limit", "last command", "frames", "err", "unans", "p50/p95 ms", "age",
-        ):  # fmt: skip
-            table.add_column(name, no_wrap=True, overflow="ellipsis")
-        clock = self.clock()
-        mono = time.monotonic()
-        for row in self.rows:
-            table.add_row(*self._cells(row, clock, mono))
-        return table
+    def notify_style_update(self) -> None:
+        super().notify_style_update()
+        self._strips = None
+
+    def render_line(self, y: int) -> Strip:
+        if self._strips is None:
+            base = self.rich_style
+            console = self.app.console
+            self._strips = []
+            for text in self.lines:
+                line = text.copy()
+                line.stylize_before(base)
+                self._strips.append(Strip(line.render(console), line.cell_len))
+        scroll_x, scroll_y = self.scroll_offset
+        width = self.size.width
+        position = scroll_y + y
+        if not 0 <= position < len(self._strips):
+            return Strip.blank(width, self.rich_style)
+        return self._strips[position].crop_extend(scroll_x, scroll_x + width, self.rich_style)
 
     def _cells(self, row: DeviceRow, clock: float | None, mono: float) -> list[Any]:
         v = derived(dict(row.values))

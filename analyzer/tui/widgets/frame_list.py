@@ -65,6 +65,7 @@ class FrameList(ScrollView, can_focus=True):
         self.marks: dict[str, int] = {}  # letter -> store index
         self.new_while_paused = 0
         self._cache: LRUCache[tuple[Any, ...], Strip] = LRUCache(2048)
+        self._styles: tuple[Style, Style] | None = None  # (base, cursor): looked up per theme
         self._selected: int | None = None
 
     # -- what is shown --------------------------------------------------------------------
@@ -141,6 +142,14 @@ class FrameList(ScrollView, can_focus=True):
     def notify_style_update(self) -> None:
         super().notify_style_update()
         self._cache.clear()
+        self._styles = None
+
+    def _base_and_cursor(self) -> tuple[Style, Style]:
+        # resolving a widget's style walks the DOM: once per theme, not once per row
+        if self._styles is None:
+            cursor = self.get_component_rich_style("frame-list--cursor")
+            self._styles = (self.rich_style, Style(bgcolor=cursor.bgcolor))
+        return self._styles
 
     # -- the cursor -------------------------------------------------------------------------
 
@@ -256,15 +265,11 @@ class FrameList(ScrollView, can_focus=True):
         )
         if self.search is not None:
             text.highlight_regex(self.search, STYLE_MATCH)
-        text.stylize_before(self.rich_style)
+        base, cursor = self._base_and_cursor()
+        text.stylize_before(base)
         if is_cursor:
-            cursor = self.get_component_rich_style("frame-list--cursor")
-            text.stylize(Style(bgcolor=cursor.bgcolor))
+            text.stylize(cursor)
         line = text.render(self.app.console)
-        strip = Strip(list(line), text.cell_len).extend_cell_length(
-            LINE_WIDTH,
-            Style(bgcolor=self.get_component_rich_style("frame-list--cursor").bgcolor)
-            if is_cursor
-            else None,
+        return Strip(list(line), text.cell_len).extend_cell_length(
+            LINE_WIDTH, cursor if is_cursor else None
         )
-        return strip
