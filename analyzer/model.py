@@ -105,6 +105,15 @@ def _mm(value: Any) -> float | None:
     return _MM[value] if 0 <= value <= 1000 else opening_mm(value)
 
 
+def json_default(obj: Any) -> Any:
+    """orjson's fallback for values a decoder may put in ``fields`` (bytes, sets, tuples)."""
+    if isinstance(obj, bytes | bytearray | memoryview):
+        return bytes(obj).hex(" ").upper()
+    if isinstance(obj, set | frozenset | tuple):
+        return list(obj)
+    return str(obj)
+
+
 def derived(d: dict[str, Any]) -> dict[str, Any]:
     """Add the fields a person reads to a state's values: millimetres and words."""
     state, fault = d.get("state"), d.get("fault")

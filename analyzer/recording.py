@@ -88,7 +88,7 @@ from . import __version__
 from .errors import UsageError
 from .lifecycle import Closing
 from .listener import Listener
-from .model import ERROR, WARNING, Item, SourceEvent, StateSample
+from .model import ERROR, WARNING, Item, SourceEvent, StateSample, json_default
 from .sources.capture import CaptureReader
 
 # -- layout ----------------------------------------------------------------------------------------
@@ -297,16 +297,7 @@ def topic_part(bus: str) -> str:
     return part or "_"
 
 
-def _default(obj: Any) -> Any:
-    """orjson fallback for values decoders may put in ``fields``."""
-    if isinstance(obj, bytes | bytearray | memoryview):
-        return bytes(obj).hex(" ").upper()
-    if isinstance(obj, set | frozenset | tuple):
-        return list(obj)
-    return str(obj)
-
-
-_dumps = functools.partial(orjson.dumps, default=_default)
+_dumps = functools.partial(orjson.dumps, default=json_default)
 
 
 def _b64(data: bytes) -> str:

@@ -8,21 +8,12 @@ docs/protocol.md explains them.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import pytest
 
 VECTORS_PATH = Path(__file__).resolve().parent / "data" / "manual_frames.json"
-
-_Test = TypeVar("_Test", bound=Callable[..., Any])
-
-
-def needs_vectors(test: _Test) -> _Test:
-    """The test unchanged: the data ships with the tests, so nothing skips for want of it
-    (kept for the tests that still decorate with it)."""
-    return test
 
 
 def load(key: str) -> list[dict[str, Any]]:

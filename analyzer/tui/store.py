@@ -27,6 +27,8 @@ import orjson
 
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
+from ..model import json_default
+
 BLOCK: Final = 256  # records per compressed block
 MAX_FLAG_BITS: Final = 63  # bit 63 collects codes beyond the first 63 seen
 SUMMARY_INTERN_LIMIT: Final = 200_000  # distinct summaries shared before the table restarts
@@ -42,15 +44,6 @@ ERROR: Final = 2
 # direction column
 DIRECTIONS: Final = {None: 0, REQUEST: 1, RESPONSE: 2}
 DIRECTION_NAMES: Final = (None, REQUEST, RESPONSE)
-
-
-def _default(obj: Any) -> Any:
-    """orjson fallback for values a decoder may put in ``fields``."""
-    if isinstance(obj, bytes | bytearray | memoryview):
-        return bytes(obj).hex(" ").upper()
-    if isinstance(obj, set | frozenset | tuple):
-        return list(obj)
-    return str(obj)
 
 
 class Interner:
@@ -202,7 +195,7 @@ class RecordStore:
                         r.index,
                         r.length,
                     ),
-                    default=_default,
+                    default=json_default,
                     option=opts,
                 )
                 for r in records

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from recording.mcap_checks import assert_time_ordered
 
 from decoders import build as b
 
@@ -245,3 +246,4 @@ def test_a_closed_terminal_finishes_the_recording(tmp_path: Path, sig: str) -> N
     with McapCaptureReader(path) as reader:
         items = list(reader)
     assert items and not reader.errors  # finished: footer and index written
+    assert_time_ordered(path)

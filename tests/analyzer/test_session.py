@@ -12,6 +12,7 @@ from pathlib import Path
 
 import orjson
 import pytest
+from recording.mcap_checks import assert_time_ordered
 
 from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.listener import Listener, listener_class, make_listener
@@ -106,6 +107,7 @@ def test_a_failing_listener_is_detached_and_the_recording_completes(tmp_path: Pa
     # the recording is complete: every record and the failure event
     assert len(list(read_records(path))) == len(collect.records) == 91
     assert any("listener bug" in e.message for e in read_events(path))
+    assert_time_ordered(path)
 
 
 def _small_batches(reader):  # type: ignore[no-untyped-def]
@@ -139,6 +141,7 @@ def test_one_state_sample_per_reading_reaches_the_recording(tmp_path: Path, name
     by_seq = {r.seq: r.t for r in collect.records}
     assert all(d["t"] == by_seq[d["seq"]] for d in states)
     assert session.counts.samples == len(states)
+    assert_time_ordered(path)
 
 
 def test_samples_are_snapshots_with_the_fields_each_record_set() -> None:

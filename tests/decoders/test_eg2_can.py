@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from protocol_vectors import load, needs_vectors
+from protocol_vectors import load
 
 from decoders import flags as F
 from decoders import registers
@@ -72,7 +72,6 @@ def check_vector_fields(rec: Record, expected: dict[str, Any]) -> None:
 # -- the manual's frames (vectors.json) ------------------------------------------------------
 
 
-@needs_vectors
 def test_vectors_present() -> None:
     assert len(CAN_VECTORS) >= 3
 
@@ -82,7 +81,6 @@ VECTOR_CASES = [(v, False) for v in CAN_VECTORS] + [
 ]
 
 
-@needs_vectors
 @pytest.mark.parametrize(
     "vec,padded",
     VECTOR_CASES,
