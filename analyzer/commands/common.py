@@ -23,26 +23,24 @@ from ..sources.pacing import parse_speed
 from ..sources.source import CaptureSource
 
 
-def non_negative_int(text: str) -> int:
-    """argparse type: 0, 1, 2, ... (a usage error otherwise)."""
+def _whole_number(text: str, lowest: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, not {value}")
+    if value < lowest:
+        raise argparse.ArgumentTypeError(f"must be {lowest} or more, not {value}")
     return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: 0, 1, 2, ... (a usage error otherwise)."""
+    return _whole_number(text, 0)
 
 
 def positive_int(text: str) -> int:
     """argparse type: 1, 2, 3, ..."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be 1 or more, not {value}")
-    return value
+    return _whole_number(text, 1)
 
 
 def positive_float(text: str) -> float:

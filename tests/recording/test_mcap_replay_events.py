@@ -7,11 +7,11 @@ import json
 import os
 import threading
 import time
-import tty
 from pathlib import Path
 
 import pytest
 from mcap_checks import assert_time_ordered
+from taps.tap_helpers import Pty
 
 from analyzer.cli import main
 from analyzer.model import INFO, WARNING, Item, SourceEvent
@@ -23,19 +23,6 @@ from decoders import build as b
 from decoders.model import Chunk
 
 T0 = 1_763_700_000.0
-
-
-class Pty:
-    """A pty pair: the test writes the master, the tap opens the slave by name."""
-
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        self.name = os.ttyname(self.slave)
-
-    def close(self) -> None:
-        os.close(self.master)
-        os.close(self.slave)
 
 
 def poll(gripper: int, opening: int) -> bytes:

@@ -5,31 +5,18 @@ settings."""
 from __future__ import annotations
 
 import argparse
-import os
-import tty
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 import serial
-from taps.tap_helpers import Collector
+from taps.tap_helpers import Collector, Pty
 
 from analyzer.commands.livesource import add_source_arguments, open_taps
 from analyzer.sources.live import Tap, TapQueue
 from analyzer.sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
 
 Calls = list[tuple[Any, ...]]
-
-
-class Pty:
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        self.name = os.ttyname(self.slave)
-
-    def close(self) -> None:
-        os.close(self.master)
-        os.close(self.slave)
 
 
 @pytest.fixture

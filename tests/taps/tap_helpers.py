@@ -1,8 +1,12 @@
-"""Helpers of the tap tests: drain a TapQueue into items and events, wait for conditions."""
+"""Helpers of the tap tests: drain a TapQueue into items and events, wait for conditions; a
+real pty pair to tap."""
 
 from __future__ import annotations
 
+import os
+import select
 import time
+import tty
 from collections.abc import Callable
 
 from analyzer.model import Item, SourceEvent
@@ -38,3 +42,28 @@ class Collector:
 
     def of(self, kind: str) -> list[SourceEvent]:
         return [e for e in self.events if e.kind == kind]
+
+
+class Pty:
+    """A pty pair: the test drives the master, the tap opens the slave by name."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # no echo, no line discipline, before the tap opens it
+        self.name = os.ttyname(self.slave)
+        self.closed = False
+
+    def write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            n = os.write(self.master, view)
+            view = view[n:]
+
+    def readable(self, timeout: float) -> bool:
+        return bool(select.select([self.master], [], [], timeout)[0])
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            os.close(self.master)
+            os.close(self.slave)

@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import os
 import random
-import select
 import threading
 import time
-import tty
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from tap_helpers import Collector as BaseCollector
+from tap_helpers import Pty
 
 from analyzer.model import ERROR, INFO, WARNING, Item
 from analyzer.sources.live import TapQueue
@@ -35,31 +34,6 @@ class Collector(BaseCollector):
 def _chunk(item: Item) -> Chunk:
     assert isinstance(item.payload, Chunk)
     return item.payload
-
-
-class Pty:
-    """A pty pair: the test drives the master, the tap opens the slave by name."""
-
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)  # no echo, no line discipline, before the tap opens it
-        self.name = os.ttyname(self.slave)
-        self.closed = False
-
-    def write(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            n = os.write(self.master, view)
-            view = view[n:]
-
-    def readable(self, timeout: float) -> bool:
-        return bool(select.select([self.master], [], [], timeout)[0])
-
-    def close(self) -> None:
-        if not self.closed:
-            self.closed = True
-            os.close(self.master)
-            os.close(self.slave)
 
 
 @pytest.fixture
