@@ -253,12 +253,11 @@ class ProgressListener(Listener):
 
 
 @contextmanager
-def batch_gc(every: int = 256) -> Iterator[None]:
-    """Records hold no reference cycles, so refcounting frees them; the cyclic collector only
-    re-walks the live objects (the throughput of a large decode halves with it on). It is
-    paused while decoding, with a young-generation collection every ``every`` seconds' worth
-    of allocations left to the thresholds, so memory stays bounded even if a library makes
-    cycles."""
+def batch_gc() -> Iterator[None]:
+    """Records hold no reference cycles, so refcounting frees them; with the default
+    thresholds the cyclic collector re-walks the live objects every few hundred allocations
+    (the throughput of a large decode halves). While decoding it runs rarely instead, so
+    memory stays bounded even if a library makes cycles."""
     was_enabled = gc.isenabled()
     old = gc.get_threshold()
     gc.set_threshold(100_000, 50, 1000)  # rare collections instead of none: bounded memory

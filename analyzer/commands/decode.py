@@ -6,7 +6,7 @@ import argparse
 from typing import IO, Any
 
 from ..listener import Listener, make_listener
-from ..outfile import OutputError, check_not_input, output_stream
+from ..outfile import OutputError, output_stream
 from ..session import Session
 from .common import (
     CaptureOptions,
@@ -95,8 +95,6 @@ def make_output(args: argparse.Namespace, out: IO[Any]) -> Listener:
 
 def run(args: argparse.Namespace) -> int:
     opts = CaptureOptions.from_args(args)
-    if args.output:
-        check_not_input(args.output, [opts.path])
     reader = open_reader(opts)  # opened first: a missing input must not touch the output
     with output_stream(args.output, binary=args.format == "jsonl", inputs=[opts.path]) as out:
         from ..parallel import decode_in_parallel
