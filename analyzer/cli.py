@@ -8,7 +8,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from . import __version__
+from . import __version__, native
 from .commands import SUBCOMMANDS
 from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError
 
@@ -29,7 +29,9 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"eg2scope {__version__}")
+    parser.add_argument(
+        "--version", action="version", version=f"eg2scope {__version__} ({native.status()})"
+    )
     sub = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         importlib.import_module(f"{__package__}.commands.{name}").add_subparser(sub)

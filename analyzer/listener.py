@@ -61,6 +61,7 @@ LISTENERS: dict[str, str] = {
     "text": "analyzer.sinks.text:TextListener",
     "jsonl": "analyzer.sinks.jsonl:JsonlListener",
     "csv": "analyzer.sinks.csv:CsvListener",
+    "parquet": "analyzer.sinks.parquet:ParquetListener",
     "stats": "analyzer.sinks.stats:StatsListener",
     "mcap": "analyzer.recording:McapRecorder",
     "rerun": "analyzer.sinks.rerun:RerunListener",

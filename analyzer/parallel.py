@@ -1,4 +1,4 @@
-"""Decoding a large capture file on every core: parts decoded in parallel, joined in order.
+"""Decoding a large capture file on every core: parts decoded in parallel, streamed in order.
 
 The decode path is sequential by nature (framing state, pending requests, timing rules), but
 that state only reaches back a bounded way. Each worker runs the session's own stages (Decoding,
@@ -15,6 +15,13 @@ The joins are checked on the state that matters, and any doubt means one piece:
   part decoded after its warm-up (so the next part's warm-up reached the same state);
 - consecutive parts must meet exactly (no record lost or doubled at the boundary).
 Only raw byte dumps and uncompressed candump logs are split; everything else is one piece.
+
+No waste: a part's output is kept in memory only until its turn (at most ``WINDOW`` parts
+ahead of the one being written), never copied through temporary files. The parent process
+decodes parts too whenever the next part to write is not ready, so a worker slowed by a busy
+core delays nothing but its own part; when no core is idle at the start, the file is decoded
+in one piece. A join that fails after parts were written resumes in one piece where the
+written output ends (``JoinError.resume``).
 """
 
 from __future__ import annotations
@@ -23,12 +30,13 @@ import gc
 import io
 import multiprocessing
 import os
-import shutil
 import signal
 import sys
-import tempfile
+import threading
+import time
 import zlib
-from collections.abc import Iterator
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -54,8 +62,12 @@ if TYPE_CHECKING:
 # the longest a request may wait for its answer (a save, 2 s) on a busy bus. A raw dump has
 # no timing, so pairing state lasts only until the next request: a short warm-up will do.
 PART_BYTES = {"candump": 6 << 20, "bytes": 1 << 20}  # the smallest part
-PART_MAX = 64 << 20  # the largest part (keeps the progress bar moving on huge files)
 PARTS_PER_WORKER = 2  # few parts: each costs a warm-up; two per worker keep both busy
+# the largest part: its output waits in memory for its turn (JSONL is ~45x a raw serial dump,
+# ~10x a candump log)
+PART_MAX = {"candump": 8 << 20, "bytes": 1 << 20}
+WINDOW = 3  # parts decoded ahead of the one being written (bounds memory)
+IDLE_NEEDED = 0.6  # of a core, idle at the start, for a split to pay
 WARMUP = {"candump": 1 << 20, "bytes": 64 << 10}
 MIN_PARALLEL_BYTES = {"candump": 8 << 20, "bytes": 2 << 20}  # smaller: one piece
 READ = 1 << 16
@@ -63,7 +75,12 @@ BATCH = 4096
 
 
 class JoinError(Exception):
-    """Two parts did not meet exactly: decode in one piece instead."""
+    """Two parts did not meet exactly: decode in one piece instead, keeping only the records
+    from ``resume`` on (a byte offset or CAN frame index; 0: nothing was written yet)."""
+
+    def __init__(self, text: str, resume: int = 0) -> None:
+        super().__init__(text)
+        self.resume = resume
 
 
 @dataclass(frozen=True)
@@ -78,7 +95,6 @@ class PartJob:
     fmt: str
     device: int | None
     errors_only: bool
-    tmpdir: str
 
 
 @dataclass(frozen=True)
@@ -95,7 +111,7 @@ class Part:
 
 @dataclass
 class PartResult:
-    out_path: str
+    output: bytes
     first: int | None  # first record's position (offset, or CAN index), before filtering
     end: int | None  # position after the last record (offset + length, or index + 1)
     records: int
@@ -161,7 +177,7 @@ def _frame_lines_before(path: Path, points: list[int]) -> list[int]:
 
 def plan(job: PartJob, workers: int = 2) -> list[Part]:
     path, kind, size = Path(job.path), job.kind, job.size
-    step = max(PART_BYTES[kind], min(PART_MAX, -(-size // (workers * PARTS_PER_WORKER))))
+    step = max(PART_BYTES[kind], min(PART_MAX[kind], -(-size // (workers * PARTS_PER_WORKER))))
     cuts = list(range(0, size, step))[1:]
     if kind == "candump":
         cuts = _line_starts(path, cuts)
@@ -250,7 +266,7 @@ class _PartDecoder:
             self.lo, self.hi = part.lo, part.hi
         else:
             self.lo, self.hi = part.index_lo, part.index_hi
-        self.result = PartResult("", None, None, 0)
+        self.result = PartResult(b"", None, None, 0)
         self.head_limit = self.lo + (WARMUP[job.kind] if job.kind == "bytes" else 1 << 30)
 
     def take(self, records: list[Record], final: bool = False) -> None:
@@ -289,94 +305,177 @@ class _PartDecoder:
 
 
 def decode_part(part: Part) -> PartResult:
-    """Worker: decode a part with warm-up and overrun, write its records to a temp file."""
-    gc.disable()  # records hold no cycles (see commands.common.batch_gc)
-    fd, out_path = tempfile.mkstemp(dir=part.job.tmpdir, suffix=f".{part.job.fmt}")
+    """Decode a part with warm-up and overrun; its output comes back with the result."""
+    out = io.BytesIO()
     at_end = part.cool_hi >= part.job.size
-    with os.fdopen(fd, "wb") as out:
-        worker = _PartDecoder(part, out)
-        decoding = worker.decoding
-        batch: list[Record] = []
-        if part.job.kind == "bytes":
-            for item in _byte_items(part):
-                batch += decoding.feed(item)
-                if len(batch) >= BATCH:
-                    worker.take(batch)
-                    batch = []
-        else:
-            feed_can = decoding.feed_can
-            for bus, frame in _can_frames(part):
-                batch += feed_can(bus, frame)
-                if len(batch) >= BATCH:
-                    worker.take(batch)
-                    batch = []
-        worker.take(batch)
-        if at_end:
-            worker.take(decoding.finish(), final=True)
-        else:
-            worker.check_end()
-            worker.take(decoding.pairer.flush(), final=True)
-        worker.output.close()
-    worker.result.out_path = out_path
+    worker = _PartDecoder(part, out)
+    decoding = worker.decoding
+    batch: list[Record] = []
+    if part.job.kind == "bytes":
+        for item in _byte_items(part):
+            batch += decoding.feed(item)
+            if len(batch) >= BATCH:
+                worker.take(batch)
+                batch = []
+    else:
+        feed_can = decoding.feed_can
+        for bus, frame in _can_frames(part):
+            batch += feed_can(bus, frame)
+            if len(batch) >= BATCH:
+                worker.take(batch)
+                batch = []
+    worker.take(batch)
+    if at_end:
+        worker.take(decoding.finish(), final=True)
+    else:
+        worker.check_end()
+        worker.take(decoding.pairer.flush(), final=True)
+    worker.output.close()
+    worker.result.output = out.getvalue()
     return worker.result
 
 
 def _worker_init() -> None:
     # Ctrl-C goes to the whole process group: the parent alone reports it, once
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    gc.disable()  # records hold no cycles (see commands.common.batch_gc)
 
 
 # -- the parent --------------------------------------------------------------------------------
 
 
+def _resume_at(part: Part) -> int:
+    return part.lo if part.job.kind == "bytes" else part.index_lo
+
+
 def _check_join(prev: PartResult, res: PartResult, part: Part) -> None:
     if prev.end is not None and res.first is not None and prev.end != res.first:
-        raise JoinError(f"parts do not meet at {part.lo}: {prev.end} != {res.first}")
+        raise JoinError(
+            f"parts do not meet at {part.lo}: {prev.end} != {res.first}", _resume_at(part)
+        )
     n = min(len(prev.overrun), len(res.head))
     if prev.overrun[:n] != res.head[:n]:
-        raise JoinError(f"the part from {part.lo} decoded its first records differently")
+        raise JoinError(
+            f"the part from {part.lo} decoded its first records differently", _resume_at(part)
+        )
+
+
+class _Ready:
+    """A part the parent decoded itself (the same face as a pool's AsyncResult)."""
+
+    def __init__(self, part: Part) -> None:
+        self.result: PartResult | None = None
+        self.error: JoinError | None = None
+        try:
+            self.result = decode_part(part)
+        except JoinError as exc:
+            self.error = exc  # raised in its turn, as a worker's would be
+
+    def ready(self) -> bool:
+        return True
+
+    def get(self) -> PartResult:
+        if self.error is not None:
+            raise self.error
+        assert self.result is not None
+        return self.result
+
+
+def spare_cores(sample_s: float = 0.1) -> float:
+    """Cores idle right now (Linux /proc/stat over ``sample_s``; elsewhere: all but this one)."""
+    cores = os.cpu_count() or 1
+
+    def idle_total() -> tuple[int, int]:
+        with open("/proc/stat") as f:
+            ticks = [int(x) for x in f.readline().split()[1:]]
+        return ticks[3] + ticks[4], sum(ticks)  # idle + iowait, all
+
+    try:
+        idle0, all0 = idle_total()
+        time.sleep(sample_s)
+        idle1, all1 = idle_total()
+    except (OSError, ValueError, IndexError):
+        return cores - 1.0
+    if all1 <= all0:
+        return cores - 1.0
+    return cores * (idle1 - idle0) / (all1 - all0)
 
 
 def run_parallel(
-    job: PartJob, out: IO[bytes], progress: Any, jobs: int = 0, header: bytes = b""
-) -> int:
-    """Decode in parts on every core, then write ``header`` and the joined output to ``out``.
-    Returns the number of records. Raises JoinError, having written nothing, when parts do not
-    meet."""
-    workers = max(1, jobs or os.cpu_count() or 2)
-    parts = plan(job, workers)
-    ctx = multiprocessing.get_context("fork")
-    results: list[PartResult] = []
-    with ctx.Pool(min(workers, len(parts)), initializer=_worker_init) as pool:
-        try:
-            for part, res in zip(parts, pool.imap(decode_part, parts), strict=True):
-                if results:
-                    _check_join(results[-1], res, part)
-                results.append(res)
-                progress(part.hi)
-        except BaseException:
-            pool.terminate()
-            raise
-    out.write(header)
+    job: PartJob, out: IO[bytes], progress: Callable[[int], None], jobs: int = 0,
+    header: bytes = b"",
+) -> int:  # fmt: skip
+    """Decode in parts on every core, writing ``header`` and each part's output to ``out`` in
+    order as soon as it is its turn. Returns the number of records. Raises JoinError when two
+    parts do not meet (``resume``: where the written output ends)."""
+    cores = max(2, jobs or os.cpu_count() or 2)
+    parts = plan(job, cores)
+    todo = iter(parts)
+    waiting: deque[tuple[Part, Any]] = deque()  # in file order: handed out, not yet written
     total = 0
-    for res in results:
-        with open(res.out_path, "rb") as f:
-            shutil.copyfileobj(f, out, 1 << 20)
-        total += res.records
+    prev: PartResult | None = None
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(min(cores - 1, len(parts)), initializer=_worker_init) as pool:
+        try:
+            for part in todo:  # the workers start on the first parts ...
+                waiting.append((part, pool.apply_async(decode_part, (part,))))
+                if len(waiting) >= cores - 1:
+                    break
+            while waiting:
+                part, pending = waiting[0]
+                if not pending.ready() and len(waiting) < WINDOW:
+                    mine = next(todo, None)  # ... and the parent takes the next one meanwhile
+                    if mine is not None:
+                        waiting.append((mine, _Ready(mine)))
+                        continue
+                waiting.popleft()
+                try:
+                    res = pending.get()
+                except JoinError as exc:  # the part could not be decided on its own
+                    raise JoinError(str(exc), 0 if prev is None else _resume_at(part)) from None
+                if prev is None:
+                    out.write(header)
+                else:
+                    _check_join(prev, res, part)
+                out.write(res.output)
+                total += res.records
+                prev = res
+                progress(part.hi)
+                if len(waiting) < WINDOW and (nxt := next(todo, None)) is not None:
+                    waiting.append((nxt, pool.apply_async(decode_part, (nxt,))))
+        except BaseException:
+            _stop(pool)
+            raise
     return total
+
+
+def _stop(pool: Any) -> None:
+    """Stop the workers now. ``Pool.terminate`` can wait forever for a result that a killed
+    worker was halfway through sending (a part's output comes back through the pool's pipe),
+    so it runs aside, and the workers are killed outright if it has not returned in a moment."""
+    stopper = threading.Thread(target=pool.terminate, daemon=True)
+    stopper.start()
+    stopper.join(2.0)
+    if stopper.is_alive():
+        for child in multiprocessing.active_children():
+            child.kill()
 
 
 def decode_in_parallel(
     opts: CaptureOptions, fmt: str, jobs: int, reader: CaptureReader, out: IO[Any]
 ) -> int | None:
     """Large raw dumps and candump logs, to JSONL or CSV: decode on every core and return the
-    exit code. None when the file is not split (the caller decodes it in one piece)."""
+    exit code. None when the file is not split (the caller decodes it in one piece); a
+    JoinError when the split failed after some output was written (the caller goes on in one
+    piece from its ``resume``)."""
     from .commands.common import byte_protocol
 
     path = Path(opts.path)
     kind = reader_kind(reader)
     if opts.speed is not None or jobs == 1 or not kind or not splittable(path, fmt, kind):
         return None
+    if not jobs and spare_cores() < IDLE_NEEDED:
+        return None  # the other cores are busy: one piece is faster
     protocol = byte_protocol(opts)
     if kind == "bytes" and protocol is None:
         with path.open("rb") as f:
@@ -390,19 +489,30 @@ def decode_in_parallel(
         CsvListener(text)  # writes the header
         header = text.getvalue().encode()
     out.flush()
-    with tempfile.TemporaryDirectory(prefix="eg2scope-") as tmpdir:
-        job = PartJob(
-            str(path), kind, path.stat().st_size, protocol, opts.bus, fmt, opts.device,
-            opts.errors_only, tmpdir,
-        )  # fmt: skip
-        try:
-            with _PartProgress(reader, opts.progress) as progress:
-                run_parallel(job, binary, progress, jobs, header)
-        except JoinError as exc:
+    job = PartJob(
+        str(path), kind, path.stat().st_size, protocol, opts.bus, fmt, opts.device,
+        opts.errors_only,
+    )  # fmt: skip
+    try:
+        with _PartProgress(reader, opts.progress) as progress:
+            run_parallel(job, binary, progress, jobs, header)
+    except JoinError as exc:
+        binary.flush()
+        if not exc.resume:
             print(f"eg2scope: decoding {path.name} in one piece ({exc})", file=sys.stderr)
             return None
+        print(f"eg2scope: decoding the rest of {path.name} in one piece ({exc})", file=sys.stderr)
+        raise
     binary.flush()
     return EXIT_OK
+
+
+def resumed(listener: Listener, resume: int) -> Listener:
+    """``listener`` given only the records from ``resume`` on (a one-piece decode going on
+    where a split decode's written output ends)."""
+    from .commands.common import FilteredListener
+
+    return FilteredListener(listener, lambda rec: _position(rec) >= resume)
 
 
 class _PartProgress:

@@ -30,6 +30,10 @@ is never reordered, even when its clock steps back.
 chunk in progress and flushes the file, so a recorder killed with SIGKILL loses at most that
 much; ``close`` writes the summary and index.
 
+**Cost.** At three messages per CAN frame the recorder's work is per message: the file is
+written by ``mcap_writer.McapWriter`` (the mcap library's layout, a batch of messages at a
+time), and every message is a bytes object of its own size (``_message``).
+
 **Reading.** An intact file is read through its index, a damaged one (a recorder killed
 mid-session, a copy cut short) chunk by chunk up to the damage. Every chunk is checked against
 its CRC (and, when indexed, against the index): a damaged chunk is reported with its byte
@@ -46,6 +50,7 @@ from __future__ import annotations
 import base64
 import binascii
 import functools
+import importlib.util
 import io
 import os
 import re
@@ -53,16 +58,14 @@ import stat
 import struct
 import time
 import zlib
-from bisect import bisect_left, bisect_right
-from collections import Counter
+from bisect import bisect_left
 from collections.abc import Iterable, Iterator, Sequence
 from datetime import UTC, datetime
-from itertools import accumulate, chain, groupby, repeat
-from operator import add, itemgetter
+from itertools import accumulate, repeat
+from operator import mul
 from typing import IO, Any, Final
 
 import orjson
-from mcap import writer as mcap_writer
 from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
@@ -79,7 +82,7 @@ from mcap.records import (
 )
 from mcap.stream_reader import StreamReader, breakup_chunk, get_chunk_data_stream
 from mcap.summary import Summary
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap.writer import LIBRARY_IDENTIFIER
 
 from decoders.model import CanFrame, Record
 from decoders.model import Chunk as ByteChunk
@@ -88,6 +91,7 @@ from . import __version__
 from .errors import UsageError
 from .lifecycle import Closing
 from .listener import Listener
+from .mcap_writer import MAGIC, McapWriter
 from .model import ERROR, WARNING, Item, SourceEvent, StateSample, json_default
 from .sources.capture import CaptureReader
 
@@ -107,8 +111,6 @@ DEVICE_STATE: Final = "eg2scope.DeviceState"
 MARK: Final = "eg2scope.Mark"
 FOXGLOVE_LOG: Final = "foxglove.Log"
 DECODE_PROBLEM: Final = "decode"  # the foxglove.Log name of a record's errors and warnings
-
-MAGIC: Final = b"\x89MCAP0\r\n"
 
 # the topic prefix of each schema (a state topic ends in /<device>)
 PREFIX_OF_SCHEMA: Final = {
@@ -271,19 +273,14 @@ SCHEMAS: Final[dict[str, dict[str, Any]]] = {
     ),
 }
 
-_COMPRESSIONS = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
+_COMPRESSIONS = {"zstd": "zstd", "lz4": "lz4", "none": ""}  # option -> MCAP compression name
 _TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_.\-/]+")
 
 
 def best_compression() -> str:
-    """zstd if the installed mcap can write it, else lz4, else none."""
-    # the mcap writer imports its compressors optionally and sets them to None when missing
+    """zstd if its module is installed, else lz4, else none."""
     for name, module in (("zstd", "zstandard"), ("lz4", "lz4")):
-        if getattr(mcap_writer, module, None) is not None:
+        if importlib.util.find_spec(module) is not None:
             return name
     return "none"
 
@@ -300,6 +297,14 @@ def topic_part(bus: str) -> str:
 _dumps = functools.partial(orjson.dumps, default=json_default)
 
 
+def _message(obj: Any) -> bytes:
+    """``obj`` as JSON in a bytes object of its own size. orjson writes into a buffer of a few
+    KiB and shrinks it in place: a batch of its results, held until the next tick, would strand
+    the rest of every buffer, and touching that much fresh memory per message (page faults)
+    costs more than encoding it."""
+    return memoryview(orjson.dumps(obj, default=json_default)).tobytes()
+
+
 def _b64(data: bytes) -> str:
     return binascii.b2a_base64(data, newline=False).decode("ascii")
 
@@ -311,15 +316,8 @@ def metadata_strings(metadata: dict[str, Any]) -> dict[str, str]:
 
 # -- writing ---------------------------------------------------------------------------------------
 
-_Entry = tuple[int, int, bytes]  # log time (ns), channel id, message
 _Timed = tuple[float | None, int, bytes]  # t (s), channel id, message
-_LOG_TIME, _CHANNEL, _DATA = itemgetter(0), itemgetter(1), itemgetter(2)
 MAX_PENDING: Final = 50_000  # messages gathered before they are written even without a tick
-_MESSAGE = struct.Struct("<BQHIQQ")  # opcode, length, channel, sequence, log and publish time
-_MESSAGE_FIELDS = _MESSAGE.size - 9  # the length counts the fields after opcode and length
-_MESSAGE_OPCODE = int(Opcode.MESSAGE)
-
-
 _LAST_NS: Final = 2**64 - 1  # MCAP times are unsigned 64-bit nanoseconds
 _LAST_S: Final = _LAST_NS / 1e9
 
@@ -332,99 +330,17 @@ def _ns(t: float) -> int:
     return _LAST_NS if t > 0 else 0
 
 
-def add_messages(writer: Writer, entries: list[_Entry]) -> None:
-    """``writer.add_message`` for each entry (log times non-decreasing; sequence 0, publish
-    time = log time), giving the same bytes at a fraction of the cost: the library builds a
-    Message object and writes it field by field, which at three messages per CAN frame costs
-    more than all the rest of a recording. Fills the writer's chunk builder and statistics
-    (mcap 1.x; ``_batchable`` checks they are there, tests check the bytes are the same)."""
-    chunk = writer._Writer__chunk_builder  # type: ignore[attr-defined]
-    limit: int = writer._Writer__chunk_size  # type: ignore[attr-defined]
-    while entries:
-        # where each message would start in the chunk in progress, and where the last ends
-        sizes = map(add, map(len, map(_DATA, entries)), repeat(_MESSAGE.size))
-        offsets = list(accumulate(sizes, initial=chunk.record_writer._buffer.tell()))
-        # as the library: the chunk ends after the message that takes it past the limit
-        n = bisect_right(offsets, limit, lo=1)
-        _commit(writer, entries[:n], offsets)
-        if n < len(offsets):
-            writer._Writer__finalize_chunk()  # type: ignore[attr-defined]
-        entries = entries[n:]
-
-
-def _commit(writer: Writer, entries: list[_Entry], offsets: list[int]) -> None:
-    """Put message records into the chunk in progress, indexed and counted as the library
-    does message by message (with iterators, not a Python loop per message)."""
-    chunk = writer._Writer__chunk_builder  # type: ignore[attr-defined]
-    stats = writer._Writer__statistics  # type: ignore[attr-defined]
-    times = list(map(_LOG_TIME, entries))
-    channels = list(map(_CHANNEL, entries))
-    datas = list(map(_DATA, entries))
-    lengths = map(add, map(len, datas), repeat(_MESSAGE_FIELDS))
-    headers = map(
-        _MESSAGE.pack, repeat(_MESSAGE_OPCODE), lengths, channels, repeat(0), times, times
-    )
-    chunk.record_writer._buffer.write(
-        b"".join(chain.from_iterable(zip(headers, datas, strict=True)))
-    )
-    # per channel, in the order the channels first appear (the library's dict orders): the
-    # message count, and the (log time, offset) entries of the chunk's message index
-    counts = Counter(channels)
-    indexes = chunk.message_indices
-    for channel in counts:
-        stats.channel_message_counts[channel] += counts[channel]
-        if channel not in indexes:
-            indexes[channel] = _MessageIndex(channel, [])
-    order = sorted(range(len(entries)), key=channels.__getitem__)
-    for channel, group in groupby(order, key=channels.__getitem__):
-        picked = list(group)
-        pairs = zip(map(times.__getitem__, picked), map(offsets.__getitem__, picked), strict=True)
-        indexes[channel].records += pairs
-    start, end = times[0], times[-1]
-    if chunk.num_messages == 0:
-        chunk.message_start_time = start
-    chunk.message_end_time = max(chunk.message_end_time, end)
-    chunk.num_messages += len(entries)
-    if stats.message_count == 0:
-        stats.message_start_time = start
-    stats.message_end_time = max(stats.message_end_time, end)
-    stats.message_count += len(entries)
-
-
-class _MessageIndex(MessageIndex):
-    """A chunk's index of one channel's messages, written in one piece when the chunk ends
-    (the library writes it two numbers at a time, as costly as the messages themselves)."""
-
-    def write(self, stream: RecordBuilder) -> None:
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(len(self.records) * 16)
-        flat = [n for entry in self.records for n in entry]  # (log time, offset) pairs
-        stream.write(struct.pack(f"<{len(flat)}Q", *flat))
-        stream.finish_record()
-
-
-def _add_one_by_one(writer: Writer, entries: list[_Entry]) -> None:
-    add = writer.add_message
-    for log_time, channel, data in entries:
-        add(channel, log_time, data, log_time)
-
-
-def _batchable(writer: Writer) -> bool:
-    """Whether the writer has the chunk builder and statistics ``add_messages`` fills."""
-    chunk = getattr(writer, "_Writer__chunk_builder", None)
-    return (
-        chunk is not None
-        and hasattr(writer, "_Writer__statistics")
-        and hasattr(writer, "_Writer__chunk_size")
-        and hasattr(writer, "_Writer__finalize_chunk")
-        and all(
-            hasattr(chunk, name)
-            for name in ("num_messages", "message_start_time", "message_end_time")
-        )
-        and isinstance(getattr(chunk, "message_indices", None), dict)
-        and isinstance(getattr(getattr(chunk, "record_writer", None), "_buffer", None), io.BytesIO)
-    )
+def _log_times(times: Sequence[float | None]) -> list[int]:
+    """Times in seconds as MCAP log times (``_ns``), the wall clock for None."""
+    try:  # all numbers: converted without a Python step per message
+        log_times = list(map(int, map(mul, times, repeat(1e9))))
+    except (TypeError, ValueError, OverflowError):  # None, NaN, infinite
+        pass
+    else:
+        if not log_times or (min(log_times) >= 0 and max(log_times) <= _LAST_NS):
+            return log_times
+    now = time.time_ns()
+    return [now if t is None else _ns(t) for t in times]
 
 
 class McapRecorder(Closing, Listener):
@@ -433,7 +349,7 @@ class McapRecorder(Closing, Listener):
     ``metadata``: what to say about the session, e.g. ``{"sources": [{"bus": "can0",
     "interface": "socketcan", "channel": "can0", "bitrate": 500000}], "passive": "yes"}``;
     tool name and version, start time and mcap library are added.
-    ``compression``: "zstd", "lz4", "none" or None for the best the installed mcap writes.
+    ``compression``: "zstd", "lz4", "none" or None for the best that is installed.
     ``log_record_problems``: also put records with errors/warnings on ``/events/<bus>``.
     """
 
@@ -461,10 +377,12 @@ class McapRecorder(Closing, Listener):
         self.closed = False
         self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed in close()
         try:
-            self._writer = Writer(
-                self._file, chunk_size=chunk_size, compression=_COMPRESSIONS[compression]
+            self._writer = McapWriter(
+                self._file,
+                chunk_size,
+                _COMPRESSIONS[compression],
+                library=f"eg2scope/{__version__} {LIBRARY_IDENTIFIER}",
             )
-            self._writer.start(library=f"eg2scope/{__version__} {LIBRARY_IDENTIFIER}")
             meta: dict[str, Any] = {
                 "tool": "eg2scope",
                 "version": __version__,
@@ -480,10 +398,12 @@ class McapRecorder(Closing, Listener):
         self._schemas: dict[str, int] = {}
         # schema -> bus (or (bus, device) for states) -> channel id
         self._channels: dict[str, dict[Any, int]] = {name: {} for name in SCHEMAS}
-        self._pending: list[_Entry] = []
+        # the messages gathered since the last tick: log time, channel, message
+        self._times: list[int] = []
+        self._ids: list[int] = []
+        self._datas: list[bytes] = []
         self._last_log_time = 0
         self._last_flush = time.monotonic()
-        self._add_messages = add_messages if _batchable(self._writer) else _add_one_by_one
 
     # -- the listener ---------------------------------------------------------------------------
 
@@ -516,7 +436,7 @@ class McapRecorder(Closing, Listener):
                     "direction": p.direction,
                     "data": _b64(p.data),
                 }
-            datas.append(_dumps(msg))
+            datas.append(_message(msg))
         self._gather([item.payload.t for item in items], channels, datas)
 
     def on_records(self, records: list[Record]) -> None:
@@ -527,7 +447,7 @@ class McapRecorder(Closing, Listener):
         self._gather(
             [rec.t for rec in records],
             [known.get(rec.bus) or self._channel(RECORD, rec.bus) for rec in records],
-            [_dumps(rec.to_dict()) for rec in records],
+            [_message(rec.to_dict()) for rec in records],
         )
         if self.log_record_problems:
             problems = [self._problem(rec) for rec in records if rec.errors or rec.warnings]
@@ -545,7 +465,7 @@ class McapRecorder(Closing, Listener):
                 known.get((s.bus, s.device)) or self._channel(DEVICE_STATE, s.bus, s.device)
                 for s in samples
             ],
-            [_dumps(s.to_dict()) for s in samples],
+            [_message(s.to_dict()) for s in samples],
         )
 
     def on_event(self, event: SourceEvent) -> None:
@@ -560,7 +480,7 @@ class McapRecorder(Closing, Listener):
         """A mark set by a person (the TUI) on ``/marks``: ``seq`` is the record it marks."""
         self._check_open()
         channel = self._channels[MARK].get("") or self._channel(MARK, "")
-        self._gather([t], [channel], [_dumps({"t": t, "name": name, "seq": seq})])
+        self._gather([t], [channel], [_message({"t": t, "name": name, "seq": seq})])
 
     def tick(self, now: float = 0.0) -> None:
         """After every batch and when idle: write what was gathered, and end the chunk in
@@ -603,27 +523,28 @@ class McapRecorder(Closing, Listener):
         """Messages of one call (their ``t``, channel and message), kept in their order: each
         gets its log time (``t`` in ns, the wall clock if none), raised to the highest of the
         call so far, so sorting the batch by time never reorders them."""
-        now = time.time_ns()
-        log_times = [
-            int(t * 1e9) if t is not None and 0 < t < _LAST_S else now if t is None else _ns(t)
-            for t in times
-        ]
-        self._pending += zip(accumulate(log_times, max), channels, datas, strict=True)
-        if len(self._pending) >= MAX_PENDING:
+        self._times += accumulate(_log_times(times), max)
+        self._ids += channels
+        self._datas += datas
+        if len(self._datas) >= MAX_PENDING:
             self._write_pending()
 
     def _write_pending(self, flush: bool = True) -> None:
         """The gathered messages in time order, none before the last one written."""
-        pending = self._pending
-        if pending:
-            self._pending = []
-            pending.sort(key=_LOG_TIME)  # stable: equal times keep the order they came in
+        times = self._times
+        if times:
+            # sorted stably by log time: equal times keep the order they came in
+            order = sorted(range(len(times)), key=times.__getitem__)
+            times = list(map(times.__getitem__, order))
+            ids = list(map(self._ids.__getitem__, order))
+            datas = list(map(self._datas.__getitem__, order))
+            self._times, self._ids, self._datas = [], [], []
             last = self._last_log_time
-            for i in range(bisect_left(pending, last, key=_LOG_TIME)):  # older than written
-                pending[i] = (last, pending[i][1], pending[i][2])
-            self._add_messages(self._writer, pending)
-            self._last_log_time = pending[-1][0]
-            self.messages += len(pending)
+            older = bisect_left(times, last)  # older than what was written: moved up to it
+            times[:older] = repeat(last, older)
+            self._writer.add_messages(times, ids, datas)
+            self._last_log_time = times[-1]
+            self.messages += len(times)
         if flush and time.monotonic() - self._last_flush >= self.flush_interval_s:
             self.flush()
 
@@ -658,7 +579,7 @@ class McapRecorder(Closing, Listener):
             "count": count,
         }
         ch = self._channels[FOXGLOVE_LOG].get(bus) or self._channel(FOXGLOVE_LOG, bus)
-        return (t, ch, _dumps(msg))
+        return (t, ch, _message(msg))
 
     def _channel(self, schema: str, bus: str, device: int | None = None) -> int:
         schema_id = self._schemas.get(schema)

@@ -1,10 +1,13 @@
-"""``eg2scope decode FILE``: decode a capture into text, JSONL or CSV."""
+"""``eg2scope decode FILE``: decode a capture into text, JSONL, CSV or Parquet."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import IO, Any
 
+from .. import native
+from ..errors import UsageError
 from ..listener import Listener, make_listener
 from ..outfile import OutputError, output_stream
 from ..session import Session
@@ -17,7 +20,8 @@ from .common import (
     run_capture,
 )
 
-FORMATS = ("text", "jsonl", "csv")
+FORMATS = ("text", "jsonl", "csv", "parquet")
+BINARY = ("jsonl", "parquet")
 EXIT_CODES = (
     "exit status: 0 decoded; 1 error (a file that cannot be read or written); 2 usage error; "
     "3 decoded as far as possible, but the input is damaged (see the messages on stderr); "
@@ -28,7 +32,7 @@ EXIT_CODES = (
 def add_subparser(sub: Any) -> None:
     parser = sub.add_parser(
         "decode",
-        help="decode a capture file into text, JSONL or CSV",
+        help="decode a capture file into text, JSONL, CSV or Parquet",
         description=(
             "Decode a capture into one line per frame: time, bus, direction, device, command "
             "and decoded values with units, with checksum/CRC errors and warnings. Every input "
@@ -50,7 +54,8 @@ def add_subparser(sub: Any) -> None:
         choices=FORMATS,
         default="text",
         help="text: for people (default); jsonl: one JSON record per line, the stable "
-        "contract for other programs; csv: for spreadsheets",
+        "contract for other programs; csv: for spreadsheets; parquet: typed columns for "
+        "pandas, polars and DuckDB (needs -o FILE, or stdout to a file or pipe)",
     )
     parser.add_argument(
         "--output",
@@ -65,8 +70,9 @@ def add_subparser(sub: Any) -> None:
         type=non_negative_int,
         default=0,
         metavar="N",
-        help="decode large raw dumps and candump logs in N processes (default 0: one per "
-        "core; 1: in one piece). The output is the same either way.",
+        help="Python engine: decode large raw dumps and candump logs in N processes (default "
+        "0: every idle core; 1: in one piece). The output is the same either way. The native "
+        "core decodes in one process, faster than the parts.",
     )
     parser.add_argument(
         "--absolute-time",
@@ -80,29 +86,60 @@ def add_subparser(sub: Any) -> None:
         default="auto",
         help="text: colour errors and warnings (default: when writing to a terminal)",
     )
+    parser.add_argument(
+        "--engine",
+        choices=native.ENGINES,
+        default="auto",
+        help="auto: the native core where it applies (candump .log and raw dumps to jsonl, csv, "
+        "text or parquet, byte-identical output), else Python (default); python: the Python "
+        "decoders "
+        "(and --jobs); native: the native core, a usage error where it cannot be used. "
+        "'eg2scope --version' says whether the native core is built",
+    )
     parser.set_defaults(func=run)
 
 
-def make_output(args: argparse.Namespace, out: IO[Any]) -> Listener:
-    """The output listener of ``--format``, found by name in the listener registry."""
+def make_output(args: argparse.Namespace, out: IO[Any], header: bool = True) -> Listener:
+    """The output listener of ``--format``, found by name in the listener registry
+    (``header``: False when a CSV header was written already)."""
+    if args.format == "csv":
+        return make_listener("csv", out, header=header)
     if args.format != "text":
         return make_listener(args.format, out)
-    colour = {"always": True, "never": False}.get(args.colour)
-    if args.output and colour is None:
-        colour = False
+    colour = text_colour(args)
     return make_listener("text", out, colour=colour, absolute_time=args.absolute_time)
 
 
+def text_colour(args: argparse.Namespace) -> bool | None:
+    """--colour: True, False, or None (decided by the output: a terminal or not)."""
+    colour = {"always": True, "never": False}.get(args.colour)
+    if args.output and colour is None:
+        colour = False
+    return colour
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.format == "parquet" and args.output in (None, "-") and sys.stdout.isatty():
+        raise UsageError("--format parquet writes a binary file: give -o FILE.parquet")
     opts = CaptureOptions.from_args(args)
     reader = open_reader(opts)  # opened first: a missing input must not touch the output
-    with output_stream(args.output, binary=args.format == "jsonl", inputs=[opts.path]) as out:
-        from ..parallel import decode_in_parallel
+    nrun = native.open_for(args, opts, reader, text_colour(args))
+    if nrun is not None:  # the native core decodes it (analyzer/native.py)
+        with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
+            return native.decode(nrun, opts.path, out, args.output, opts.progress)
+    with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
+        from ..parallel import JoinError, decode_in_parallel, resumed
 
-        done = decode_in_parallel(opts, args.format, args.jobs, reader, out)
+        resume = 0
+        try:
+            done = decode_in_parallel(opts, args.format, args.jobs, reader, out)
+        except JoinError as exc:  # parts were written: go on in one piece where they end
+            done, resume = None, exc.resume
         if done is not None:
             return done
-        listener = make_output(args, out)
+        listener = make_output(args, out, header=not resume)
+        if resume:
+            listener = resumed(listener, resume)
         session, reader = run_capture(opts, [listener], reader)
         raise_output_failure(session, args.output)
     return finish_capture(opts.path, session, reader)

@@ -31,6 +31,7 @@ import io
 import itertools
 import logging
 import os
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
@@ -129,7 +130,7 @@ def byte_lines(f: IO[bytes]) -> Iterator[bytes]:
     try:
         while len(head) < HEAD_SIZE and (block := read1(HEAD_SIZE - len(head))):
             head += block
-    except (OSError, EOFError) as exc:
+    except (OSError, EOFError, zlib.error) as exc:
         error = exc
     if head.startswith(BOM):
         head = head[len(BOM) :]
@@ -245,7 +246,7 @@ class CandumpReader(_FileReaderBase):
                     skipped += 1
                     continue
                 yield parsed
-        except (OSError, EOFError) as exc:  # a cut or damaged .gz
+        except (OSError, EOFError, zlib.error) as exc:  # a cut or damaged .gz
             self._error(f"line {lineno + 1}: read error: {type(exc).__name__}: {exc}")
         finally:
             self.frames = lineno - skipped

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, TextIO
@@ -127,7 +128,11 @@ class LineFeed:
         self._settle()
         try:
             line = next(self._f)
-        except (OSError, EOFError) as exc:  # a cut or damaged .gz: the lines before it count
+        except (
+            OSError,
+            EOFError,
+            zlib.error,
+        ) as exc:  # a cut or damaged .gz: the lines before it count
             self.read_error = exc
             raise StopIteration from None
         self.number += 1

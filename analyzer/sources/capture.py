@@ -21,6 +21,7 @@ from __future__ import annotations
 import gzip
 import importlib
 import os
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -118,7 +119,7 @@ class GzipBytesReader(CaptureReader):
                 total += len(data)
                 self.position = self._raw.tell()
                 yield Item(bus, Chunk(data))
-        except (OSError, EOFError) as exc:
+        except (OSError, EOFError, zlib.error) as exc:
             self.errors.append(
                 f"{self.path.name}: compressed data damaged or cut short after {total} bytes "
                 f"({type(exc).__name__}: {exc}); the rest is lost"

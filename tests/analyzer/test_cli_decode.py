@@ -328,15 +328,43 @@ def test_parallel_decode_equals_one_piece(
                 lines.append(b.candump_line(b.can_read_response(dev, 1120, data, t=t)))
         path.write_text("\n".join(lines) + "\n")
     assert parallel.splittable(path, "jsonl", kind)
-    code, split, err = run_cli(capsysbinary, "decode", "-f", "jsonl", str(path))
+    # -j 2: split even when the machine is busy (by default a busy machine decodes in one piece)
+    py = ("--engine", "python")  # the parts are the Python engine's
+    code, split, err = run_cli(capsysbinary, "decode", *py, "-f", "jsonl", "-j", "2", str(path))
     assert code == 0 and "one piece" not in err
-    code, whole, _ = run_cli(capsysbinary, "decode", "-f", "jsonl", "--jobs", "1", str(path))
+    code, whole, _ = run_cli(capsysbinary, "decode", *py, "-f", "jsonl", "--jobs", "1", str(path))
     assert code == 0
     assert split == whole
     records = [json.loads(line) for line in whole.splitlines()]
     assert sum(1 for r in records if r["pair"] is not None) > 1000
     if kind == "bytes":
         assert sum(r["length"] for r in records) == path.stat().st_size
-    code, split_csv, _ = run_cli(capsysbinary, "decode", "-f", "csv", str(path))
-    code, whole_csv, _ = run_cli(capsysbinary, "decode", "-f", "csv", "-j", "1", str(path))
+    code, split_csv, _ = run_cli(capsysbinary, "decode", *py, "-f", "csv", "-j", "2", str(path))
+    code, whole_csv, _ = run_cli(capsysbinary, "decode", *py, "-f", "csv", "-j", "1", str(path))
     assert split_csv == whole_csv
+
+
+def test_split_decode_that_fails_a_join_midway_goes_on_in_one_piece(
+    capsysbinary, tmp_path: Path, monkeypatch
+) -> None:
+    """Parts already written stay; the rest comes from a one-piece decode, nothing doubled."""
+    import analyzer.parallel as parallel
+    from decoders import build as b
+
+    monkeypatch.setitem(parallel.PART_BYTES, "bytes", 20_000)
+    monkeypatch.setitem(parallel.WARMUP, "bytes", 8_000)
+    monkeypatch.setitem(parallel.MIN_PARALLEL_BYTES, "bytes", 40_000)
+    pair = b.serial_frame(1, 0xD9) + b.serial_frame(1, 0xD9, b.u16le(500), response=True)
+    head = pair * (49_990 // len(pair))
+    # a request that waits across the second cut (25,000 bytes a part), then silence longer
+    # than the warm-up: that part cannot be decided on its own
+    data = head + b.serial_frame(2, 0xD9) + b"\x00" * 10_000
+    data += pair * ((100_000 - len(data)) // len(pair))
+    path = tmp_path / "stalled.bin"
+    path.write_bytes(data)
+    py = ("--engine", "python")  # the parts are the Python engine's
+    code, split, err = run_cli(capsysbinary, "decode", *py, "-f", "csv", "-j", "2", str(path))
+    assert code == 0 and "decoding the rest of stalled.bin in one piece" in err
+    code, whole, _ = run_cli(capsysbinary, "decode", *py, "-f", "csv", "-j", "1", str(path))
+    assert split == whole
+    assert split.count("seq,t,bus") == 1  # one header

@@ -177,8 +177,9 @@ def _modbus_dump_with_a_request_waiting_across_a_boundary(path: Path) -> None:
 def test_parallel_output_equals_one_piece_when_state_crosses_a_boundary(tmp_path: Path) -> None:
     dump = tmp_path / "modbus.bin"
     _modbus_dump_with_a_request_waiting_across_a_boundary(dump)
-    one = eg2scope("decode", str(dump), "-p", "modbus", "-f", "jsonl", "-j", "1", timeout=300)
-    two = eg2scope("decode", str(dump), "-p", "modbus", "-f", "jsonl", "-j", "2", timeout=300)
+    py = ("--engine", "python")  # the parts are the Python engine's
+    one = eg2scope("decode", str(dump), *py, "-p", "modbus", "-f", "jsonl", "-j", "1", timeout=300)
+    two = eg2scope("decode", str(dump), *py, "-p", "modbus", "-f", "jsonl", "-j", "2", timeout=300)
     assert one.returncode == two.returncode == 0
     assert two.stdout == one.stdout
     waiting = [json.loads(x) for x in one.stdout.splitlines() if "no response" in x]
@@ -193,7 +194,8 @@ def test_ctrl_c_in_a_parallel_decode_is_one_clean_line(tmp_path: Path) -> None:
     dump.write_bytes(frame * ((40 << 20) // len(frame)))
     env = {**ENV, "TMPDIR": str(tmp_path)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "analyzer", "decode", str(dump), "-f", "jsonl", "-j", "2",
+        [sys.executable, "-m", "analyzer", "decode", str(dump), "--engine", "python", "-f",
+         "jsonl", "-j", "2",
          "-o", str(tmp_path / "out.jsonl")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT,
         start_new_session=True,
@@ -247,3 +249,36 @@ def test_a_closed_terminal_finishes_the_recording(tmp_path: Path, sig: str) -> N
         items = list(reader)
     assert items and not reader.errors  # finished: footer and index written
     assert_time_ordered(path)
+
+
+# -- damaged compression ----------------------------------------------------------------------
+
+
+def _bad_deflate_block(data: bytes) -> bytes:
+    """``data`` gzip-compressed, with its first deflate block's type set to the invalid 11: zlib
+    says "invalid block type" (not an OSError: it must be caught as damage all the same)."""
+    import gzip
+
+    packed = bytearray(gzip.compress(data))
+    packed[10] |= 0x06
+    return bytes(packed)
+
+
+@pytest.mark.parametrize("engine", ["python", "auto"])
+@pytest.mark.parametrize(
+    ("name", "payload", "message"),
+    [
+        ("dump.bin.gz", b.serial_frame(1, 0x41) * 500, "compressed data damaged or cut short"),
+        ("bus.log.gz", b"(1.000000) can0 01180001#08\n" * 500, "line 1: read error:"),
+    ],
+    ids=["raw-dump", "candump"],
+)
+def test_a_bad_deflate_block_is_damage_not_a_traceback(
+    tmp_path: Path, engine: str, name: str, payload: bytes, message: str
+) -> None:
+    path = tmp_path / name
+    path.write_bytes(_bad_deflate_block(payload))
+    res = eg2scope("decode", str(path), "--engine", engine, "-f", "jsonl")
+    assert res.returncode == 3, res.stderr
+    assert message in res.stderr and "invalid block type" in res.stderr
+    assert "Traceback" not in res.stderr

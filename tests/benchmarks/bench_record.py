@@ -10,8 +10,8 @@ recorder's CPU is the process's minus the flooder thread's own.
 Serial: ``eg2scope record --serial PTY`` runs as a child process while this process writes
 realistic frames into the pty at the byte rate of a saturated line (115200 baud 8N1 = 11520
 bytes/s); the child's CPU and peak memory come from its rusage.
-Targets (issue 3): 8,000 CAN frames/s (a saturated 1 Mbit/s bus) and a saturated 115200-baud
-line, under one core.
+Targets: 8,000 CAN frames/s (a saturated 1 Mbit/s bus) and a saturated 115200-baud line, under
+one core (issue 3); at 12,000 CAN frames/s, zero drops and at most 0.35 core (issue 10).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ sys.path.insert(0, str(HERE))
 import can  # noqa: E402
 from traffic import can_frames, modbus_frames  # noqa: E402
 
+from analyzer.commands.common import batch_gc  # noqa: E402
 from analyzer.recording import McapRecorder  # noqa: E402
 from analyzer.session import live_session  # noqa: E402
 from analyzer.sources.can_tap import CanTap  # noqa: E402
@@ -73,26 +74,32 @@ def bench_can(rate: int, duration: float, out: Path) -> dict:
         thread.start()
 
     session.source.on_started = start_flood
-    cpu0, wall0 = time.process_time(), time.perf_counter()
-    runner = threading.Thread(target=session.run)
-    runner.start()
-    time.sleep(0.2)
-    thread.join()
-    # let the recorder drain what is queued, then stop
-    deadline = time.perf_counter() + 5
-    while session.counts.items < flood["sent"] and time.perf_counter() < deadline:
-        time.sleep(0.05)
-    lag = time.perf_counter()
-    session.stop()
-    runner.join()
-    wall = time.perf_counter() - wall0
-    cpu = time.process_time() - cpu0 - flood["cpu"]
+    with batch_gc():  # as run_session (eg2scope record) runs a session
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        runner = threading.Thread(target=session.run)
+        runner.start()
+        time.sleep(0.2)
+        thread.join()
+        # let the recorder drain what is queued, then stop
+        deadline = time.perf_counter() + 5
+        while session.counts.items < flood["sent"] and time.perf_counter() < deadline:
+            time.sleep(0.05)
+        lag = time.perf_counter()
+        session.stop()
+        runner.join()
+        wall = time.perf_counter() - wall0
+        cpu = time.process_time() - cpu0 - flood["cpu"]
+    captured = session.counts.items
     return {
         "rate": rate,
         "sent": flood["sent"],
-        "captured": session.counts.items,
+        "captured": captured,
         "dropped": session.counts.dropped,
         "cpu_cores": cpu / wall,
+        # the recorder's CPU per frame at the rate asked: what cpu_cores would be if the
+        # recorder had the CPU to itself (on a busy machine it falls behind and catches up
+        # after the flood, which stretches the wall time cpu_cores is measured over)
+        "cpu_per_frame_cores": cpu / max(1, captured) * rate,
         "drain_s": lag - (wall0 + 0.2 + duration),
         "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
@@ -178,6 +185,15 @@ def main() -> int:
                 r = bench_can(rate, args.duration, out)
                 achieved = r["sent"] / args.duration
                 held = r["dropped"] == 0 and r["captured"] == r["sent"] and r["cpu_cores"] < 1
+                print(
+                    f"CAN {rate:>6,} frames/s for {args.duration:.0f} s: sent {r['sent']:,}, "
+                    f"captured {r['captured']:,}, dropped {r['dropped']}, recorder CPU "
+                    f"{r['cpu_cores']:.2f} cores ({r['cpu_per_frame_cores']:.2f} from its CPU "
+                    f"per frame), drained {max(0.0, r['drain_s']):.1f} s after the flood, "
+                    f"peak RSS {r['rss_mb']:.0f} MB: "
+                    f"{'sustained' if held else 'NOT sustained'}",
+                    flush=True,
+                )
                 if achieved < 0.97 * rate:
                     print(
                         f"CAN {rate:,} frames/s asked: the flooder thread reached only "
@@ -187,13 +203,10 @@ def main() -> int:
                     if held:
                         best = max(best, int(achieved))
                     break
-                print(
-                    f"CAN {rate:>6,} frames/s for {args.duration:.0f} s: sent {r['sent']:,}, "
-                    f"captured {r['captured']:,}, dropped {r['dropped']}, recorder CPU "
-                    f"{r['cpu_cores']:.2f} cores, peak RSS {r['rss_mb']:.0f} MB: "
-                    f"{'sustained' if held else 'NOT sustained'}",
-                    flush=True,
-                )
+                if rate == 12_000:
+                    light = held and r["cpu_cores"] <= 0.35
+                    print(f"CAN 12,000 frames/s at most 0.35 core: {'yes' if light else 'NO'}")
+                    ok &= light
                 if not held:
                     break
                 best = rate

@@ -5,26 +5,17 @@ a byte stream is never reordered."""
 from __future__ import annotations
 
 import base64
-import io
 import math
 import random
 from pathlib import Path
 
 import orjson
-import pytest
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
 from mcap_checks import assert_time_ordered, mcap_messages
 
 from analyzer.model import INFO, WARNING, Item, SourceEvent
 from analyzer.pipeline import Decoding
-from analyzer.recording import (
-    McapCaptureReader,
-    McapRecorder,
-    _batchable,
-    add_messages,
-    read_records,
-)
+from analyzer.recording import McapCaptureReader, McapRecorder, read_records
 from analyzer.tracker import Tracker
 from decoders import build as b
 from decoders.model import CanFrame, Chunk
@@ -172,52 +163,6 @@ def test_untimed_input_gets_the_wall_clock_in_order(tmp_path: Path) -> None:
     msgs = mcap_messages(path)
     assert [orjson.loads(orjson.dumps(m[5]))["t"] for m in msgs] == [None] * 6
     assert msgs[0][4] > 1_700_000_000 * 10**9  # now, in nanoseconds
-
-
-@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD])
-def test_batched_messages_are_the_bytes_the_library_writes(compression: CompressionType) -> None:
-    """The recorder adds a batch of messages to the mcap writer in one go (the library's
-    per-message call costs more than the rest of a recording): the file is byte for byte the
-    one the library's add_message writes, chunk boundaries, indexes and statistics included."""
-    rng = random.Random(7)
-    entries = []
-    t = 1_763_700_000 * 10**9
-    for _ in range(3000):
-        t += rng.choice((0, 0, 1, 120_000, 5_000_000))  # equal times too
-        entries.append(
-            (t, rng.randint(1, 4), bytes(rng.randrange(256) for _ in range(rng.randint(0, 90))))
-        )
-
-    def written(batched: bool) -> bytes:
-        out = io.BytesIO()
-        writer = Writer(out, chunk_size=2048, compression=compression)
-        writer.start()
-        schema = writer.register_schema("s", "jsonschema", b"{}")
-        for n in range(4):
-            writer.register_channel(f"/c{n}", "json", schema)
-        assert _batchable(writer)
-        k = 0
-        while k < len(entries):
-            size = rng.randint(1, 400)
-            if batched:
-                add_messages(writer, entries[k : k + size])
-            else:
-                for log_time, channel, data in entries[k : k + size]:
-                    writer.add_message(channel, log_time, data, log_time)
-            k += size
-        writer.finish()
-        return out.getvalue()
-
-    library, ours = written(False), written(True)
-    assert len(library) > 40_000
-    assert ours == library
-
-
-def test_a_writer_without_the_expected_internals_is_written_message_by_message() -> None:
-    class Other:
-        pass
-
-    assert not _batchable(Other())  # type: ignore[arg-type]
 
 
 def test_nonsense_times_never_fail_the_recording(tmp_path: Path) -> None:

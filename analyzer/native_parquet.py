@@ -1,0 +1,165 @@
+"""``eg2scope decode --format parquet`` on the native core: the core builds the Arrow columns of
+its records itself (native/src/arrow.rs, in ``PARSE_SCHEMA``'s layout: no JSON), and they go to
+``ParquetRecordWriter.write_parsed`` (analyzer/sinks/parquet.py), the Python engine's own
+flattening and writing: the same Parquet from both engines (tests/native/test_native_parquet.py).
+
+The columns are described to the core from ``PARSE_SCHEMA`` at the start of a run (one home for
+them: analyzer/parquet_schema.py); the core mirrors ``_line_by_line``/``_split_fields`` of
+the Python path for each record, ``other_fields`` included. Batches are Parquet row groups.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import IO, Any, Final
+
+import pyarrow as pa
+
+from .parquet_schema import FAMILY, OTHER_FIELDS, PARSE_SCHEMA, VALUES_KEY, parse_key
+from .sinks.parquet import ROW_GROUP_ROWS, ParquetRecordWriter
+
+# the Arrow types the core builds, by the names it knows them
+_TYPES: Final = {
+    pa.int64(): "int64",
+    pa.float64(): "float64",
+    pa.string(): "string",
+    pa.bool_(): "bool",
+}
+
+
+def _describe(name: str, type_: pa.DataType, out: list[tuple[str, str, int]]) -> None:
+    """A column and its children, depth first, as the core takes them."""
+    if pa.types.is_struct(type_):
+        out.append((name, "struct", type_.num_fields))
+        for child in type_:
+            _describe(child.name, child.type, out)
+    elif pa.types.is_list(type_):
+        out.append((name, "list", 1))
+        _describe("item", type_.value_type, out)
+    else:
+        out.append((name, _TYPES[type_], 0))
+
+
+def columns() -> list[tuple[str, str, int]]:
+    """``PARSE_SCHEMA`` described for the core."""
+    out: list[tuple[str, str, int]] = []
+    for f in PARSE_SCHEMA:
+        _describe(f.name, f.type, out)
+    return out
+
+
+def families() -> list[tuple[str, str]]:
+    """protocol -> the column its ``fields`` go to."""
+    return [(protocol, parse_key(family)) for protocol, family in FAMILY.items()]
+
+
+def open_run(native: Any, path: str, **options: Any) -> Any:
+    """The core's ``ArrowRun`` over a capture (the options of ``DecodeRun`` that apply)."""
+    return native.ArrowRun(
+        path,
+        columns(),
+        families(),
+        OTHER_FIELDS,
+        VALUES_KEY,
+        **options,
+    )
+
+
+def _skip(type_: pa.DataType, parts: Iterator[Any]) -> None:
+    """Pass over the children of an all-null column (the core hands them out too)."""
+    for child in _children(type_):
+        next(parts)
+        _skip(child, parts)
+
+
+def _children(type_: pa.DataType) -> list[pa.DataType]:
+    if pa.types.is_struct(type_):
+        return [c.type for c in type_]
+    if pa.types.is_list(type_):
+        return [type_.value_type]
+    return []
+
+
+_NULLS: dict[pa.DataType, pa.Array] = {}
+
+
+def _nulls(rows: int, type_: pa.DataType) -> pa.Array:
+    """A column of nulls: a slice of one array per type (most columns are empty)."""
+    array = _NULLS.get(type_)
+    if array is None or len(array) < rows:
+        array = _NULLS[type_] = pa.nulls(max(rows, ROW_GROUP_ROWS), type_)
+    return array.slice(0, rows)
+
+
+def _array(type_: pa.DataType, parts: Iterator[Any]) -> pa.Array:
+    """The next array of a batch (its children after it), from the core's buffers: an int
+    (the length) for a column of nulls, else Arrow's buffers."""
+    part = next(parts)
+    if type(part) is int:
+        _skip(type_, parts)
+        return _nulls(part, type_)
+    children = [_array(c, parts) for c in _children(type_)] or None
+    length, nulls, validity, values, data = part
+    buffers = [None if validity is None else pa.py_buffer(validity)]
+    if not pa.types.is_struct(type_):
+        buffers.append(pa.py_buffer(values))
+    if data is not None:
+        buffers.append(pa.py_buffer(data))
+    return pa.Array.from_buffers(type_, length, buffers, nulls, 0, children)
+
+
+def batch_table(parts: list[Any]) -> pa.Table:
+    """One batch of the core as a table in ``PARSE_SCHEMA``'s layout."""
+    it = iter(parts)
+    return pa.Table.from_arrays([_array(f.type, it) for f in PARSE_SCHEMA], schema=PARSE_SCHEMA)
+
+
+@contextmanager
+def _interrupts_between_batches() -> Iterator[list[int]]:
+    """Ctrl-C, SIGTERM and SIGHUP noted (the list gets the signal) rather than raised: most of
+    the time goes to Arrow writing a batch, and a write broken off leaves a file no reader
+    opens. Only the main thread can handle signals: elsewhere nothing is noted."""
+    noted: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield noted
+        return
+
+    def note(signum: int, frame: Any) -> None:
+        noted.append(signum)
+
+    wanted = [signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)]
+    previous = {sig: signal.signal(sig, note) for sig in wanted if sig is not None}
+    try:
+        yield noted
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def write(run: Any, out: str | IO[bytes], tick: Callable[[], None] | None = None) -> int:
+    """Write a native run's records as Parquet (``tick``: called after each batch, for a
+    progress bar); the number of rows. Interrupted (Ctrl-C, SIGTERM, SIGHUP: noted, acted on
+    between batches), what was decoded stays written, footer included, and KeyboardInterrupt
+    is raised, as with the Python engine; on any other failure nothing more is written."""
+    writer = ParquetRecordWriter(out)
+    try:
+        with _interrupts_between_batches() as interrupted:
+            for _rows, parts in run:
+                writer.write_parsed(batch_table(parts))
+                if tick is not None:
+                    tick()
+                if interrupted:
+                    break
+    except BaseException:
+        run.close()
+        writer.abandon()
+        raise
+    if interrupted:
+        run.close()
+        writer.close()
+        raise KeyboardInterrupt
+    writer.close()
+    return writer.rows

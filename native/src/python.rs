@@ -1,0 +1,308 @@
+//! The Python extension module `analyzer._native` (built with the cargo feature `python` by
+//! setuptools-rust, see pyproject.toml). Python drives it from `analyzer/native.py`.
+//!
+//! One class, `DecodeRun`: a decode of one capture file, iterated for `bytes` batches of
+//! output (about `batch_bytes` each) that Python writes to its output stream, or told to write
+//! each batch straight to a file descriptor (`write_batch(fd)`: no copy into a Python object).
+//! Decoding runs with the GIL released, so a progress bar or a signal handler keeps working
+//! between batches; Python never sees one object per frame.
+//!
+//! Errors: an input that cannot be opened raises `OSError` (its subclass by errno, the file
+//! named); an input or an option the native core does not handle raises `Unsupported`, which
+//! tells Python to decode with its own engine instead.
+
+use crate::model::{EG2_SERIAL, MODBUS_RTU};
+use crate::pipeline::{DecodeOptions, DecodeRun};
+use crate::writers::{Format, TextOptions};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyOSError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyBytes;
+use std::io;
+use std::path::PathBuf;
+
+#[path = "python_arrow.rs"]
+mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output (helper N)
+
+create_exception!(
+    analyzer._native,
+    Unsupported,
+    PyException,
+    "The native core cannot decode this input with these options: use the Python engine."
+);
+
+/// The default size of one output batch: large enough that Python's per-batch cost (one
+/// `bytes` object, one write) vanishes, small enough to keep memory flat.
+const BATCH_BYTES: usize = 1 << 20;
+
+fn format_by_name(name: &str) -> PyResult<Format> {
+    match name {
+        "jsonl" => Ok(Format::Jsonl),
+        "csv" => Ok(Format::Csv),
+        "text" => Ok(Format::Text),
+        _ => Err(PyValueError::new_err(format!(
+            "unknown format {name:?} (jsonl, csv or text)"
+        ))),
+    }
+}
+
+/// The protocol names of decoders/model.py (what `decoders.registry.resolve_protocol` gives).
+fn protocol_by_name(name: Option<&str>) -> PyResult<Option<&'static str>> {
+    match name {
+        None => Ok(None),
+        Some(EG2_SERIAL) => Ok(Some(EG2_SERIAL)),
+        Some(MODBUS_RTU) => Ok(Some(MODBUS_RTU)),
+        Some(other) => Err(Unsupported::new_err(format!(
+            "protocol {other:?} is not a byte-stream protocol of the native core"
+        ))),
+    }
+}
+
+/// An io error as Python's `OSError`, its subclass chosen as Python chooses it: from the errno
+/// (`OSError(errno, strerror, filename)` gives FileNotFoundError, PermissionError, ...), or from
+/// the error's kind when the pipeline wrote the message itself ("capture file not found: x").
+fn os_error(err: io::Error, path: &std::path::Path) -> PyErr {
+    if err.kind() == io::ErrorKind::Unsupported {
+        return Unsupported::new_err(err.to_string());
+    }
+    match err.raw_os_error() {
+        Some(errno) => {
+            // the strerror alone: OSError.__str__ adds the errno and the file name
+            PyOSError::new_err((errno, strerror(errno), path.to_path_buf()))
+        }
+        None => PyErr::from(err),
+    }
+}
+
+/// The text of an errno, as Python's `os.strerror` gives it.
+fn strerror(errno: i32) -> String {
+    let text = io::Error::from_raw_os_error(errno).to_string();
+    match text.find(" (os error") {
+        Some(end) => text[..end].to_owned(),
+        None => text,
+    }
+}
+
+/// Write all of `data` to the file descriptor `fd`, which stays open (it is Python's).
+#[cfg(unix)]
+fn write_fd(fd: i32, data: &[u8]) -> io::Result<usize> {
+    use std::io::Write;
+    use std::mem::ManuallyDrop;
+    use std::os::fd::FromRawFd;
+
+    if fd < 0 {
+        return Err(io::Error::from_raw_os_error(9)); // EBADF, as os.write(-1, ...) says
+    }
+    // SAFETY: the descriptor is open for the whole call (Python holds the file object) and
+    // ManuallyDrop keeps it from being closed here.
+    let mut file = ManuallyDrop::new(unsafe { std::fs::File::from_raw_fd(fd) });
+    file.write_all(data)?; // retries EINTR and short writes
+    Ok(data.len())
+}
+
+/// Elsewhere Python writes the `bytes` batches itself (analyzer/native.py uses `write_batch`
+/// on POSIX only).
+#[cfg(not(unix))]
+fn write_fd(_fd: i32, _data: &[u8]) -> io::Result<usize> {
+    Err(io::ErrorKind::Unsupported.into())
+}
+
+/// A value handed to `Python::allow_threads`, which asks for `Send` only so that nothing tied to
+/// the GIL is used without it. The decoding state holds no Python object and the closure runs
+/// synchronously on the calling thread (`allow_threads` does not move it), and the class is
+/// `unsendable` (PyO3 refuses access from any other thread), so the state never changes
+/// threads even where it is not `Send` (an `Rc` inside the pipeline).
+struct NoGil<T>(T);
+
+// SAFETY: see above: used only for a closure that runs on the thread that owns the value.
+unsafe impl<T> Send for NoGil<T> {}
+
+impl<T> NoGil<T> {
+    /// The value (a method, so that a closure captures the whole wrapper, not its field).
+    fn into_inner(self) -> T {
+        self.0
+    }
+}
+
+/// `DecodeRun(path, format, protocol=None, bus=None, device=None, errors_only=False,
+/// colour=False, absolute_time=False, batch_bytes=1 MiB)`: iterate it for the output bytes.
+#[pyclass(name = "DecodeRun", module = "analyzer._native", unsendable)]
+struct PyDecodeRun {
+    run: DecodeRun,
+    buf: Vec<u8>,
+    batch_bytes: usize,
+    done: bool,
+}
+
+#[pymethods]
+impl PyDecodeRun {
+    #[new]
+    #[pyo3(signature = (path, format, protocol=None, bus=None, device=None, errors_only=false,
+                        colour=false, absolute_time=false, batch_bytes=BATCH_BYTES))]
+    #[allow(clippy::too_many_arguments)] // the decode command's options, by keyword
+    fn new(
+        py: Python<'_>,
+        path: PathBuf,
+        format: &str,
+        protocol: Option<&str>,
+        bus: Option<String>,
+        device: Option<i64>,
+        errors_only: bool,
+        colour: bool,
+        absolute_time: bool,
+        batch_bytes: usize,
+    ) -> PyResult<Self> {
+        let opts = DecodeOptions {
+            protocol: protocol_by_name(protocol)?,
+            bus,
+            device,
+            errors_only,
+            format: format_by_name(format)?,
+            text: TextOptions {
+                colour,
+                absolute_time,
+            },
+        };
+        // opening reads the head of the file (protocol detection): no GIL needed
+        let run = {
+            let path = path.as_path();
+            let run = py.allow_threads(|| NoGil(DecodeRun::open(path, opts)));
+            run.into_inner().map_err(|e| os_error(e, path))?
+        };
+        Ok(PyDecodeRun {
+            run,
+            buf: Vec::new(),
+            batch_bytes: batch_bytes.max(1),
+            done: false,
+        })
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    /// The next batch of output bytes; StopIteration when everything has been written.
+    fn __next__<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>) -> Option<Bound<'py, PyBytes>> {
+        let this = &mut *slf;
+        while !this.done {
+            this.buf.clear();
+            let work = NoGil((&mut this.run, &mut this.buf, this.batch_bytes));
+            let more = py.allow_threads(move || {
+                let (run, buf, max) = work.into_inner();
+                run.next_batch(buf, max)
+            });
+            this.done = !more;
+            if !this.buf.is_empty() {
+                let batch = PyBytes::new(py, &this.buf);
+                if this.buf.capacity() > 4 * this.batch_bytes {
+                    this.buf = Vec::new(); // one huge batch must not pin its memory
+                }
+                return Some(batch);
+            }
+        }
+        None
+    }
+
+    /// Decode the next batch and write it to the file descriptor `fd` (an open, blocking file,
+    /// pipe or terminal that Python has flushed): no `bytes` object, no copy. Returns the
+    /// number of bytes written, 0 once everything has been written. A failed write raises
+    /// OSError from its errno (BrokenPipeError for a closed pipe, ...), as Python's own write
+    /// would.
+    fn write_batch(&mut self, py: Python<'_>, fd: i32) -> PyResult<usize> {
+        while !self.done {
+            self.buf.clear();
+            let work = NoGil((&mut self.run, &mut self.buf, self.batch_bytes));
+            let (more, written) = py.allow_threads(move || {
+                let (run, buf, max) = work.into_inner();
+                let more = run.next_batch(buf, max);
+                (more, write_fd(fd, buf))
+            });
+            self.done = !more;
+            let n = written.map_err(|e| match e.raw_os_error() {
+                Some(errno) => PyOSError::new_err((errno, strerror(errno))),
+                None => PyErr::from(e),
+            })?;
+            if n > 0 {
+                return Ok(n);
+            }
+        }
+        Ok(0)
+    }
+
+    /// Bytes of the input read so far (compressed bytes for .gz), for a progress bar.
+    #[getter]
+    fn position(&self) -> u64 {
+        self.run.position()
+    }
+
+    /// The input file's size in bytes.
+    #[getter]
+    fn size(&self) -> u64 {
+        self.run.size()
+    }
+
+    /// Damage found in the input so far, as the Python readers' `errors` say it.
+    #[getter]
+    fn errors(&self) -> Vec<String> {
+        self.run.errors().to_vec()
+    }
+
+    /// Records written so far (after the --device / --errors-only filter).
+    #[getter]
+    fn records_written(&self) -> u64 {
+        self.run.records_written()
+    }
+
+    /// Whether every output byte has been handed out.
+    #[getter]
+    fn finished(&self) -> bool {
+        self.done
+    }
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyDecodeRun>()?;
+    python_arrow::register(m)?;
+    m.add("Unsupported", m.py().get_type::<Unsupported>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("FORMATS", ("jsonl", "csv", "text"))?;
+    m.add("PROTOCOLS", (EG2_SERIAL, MODBUS_RTU))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strerror_is_the_text_python_shows() {
+        assert_eq!(strerror(2), "No such file or directory");
+        assert_eq!(strerror(28), "No space left on device");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn write_fd_writes_everything_and_keeps_the_descriptor() {
+        use std::io::{Read, Seek};
+        use std::os::fd::AsRawFd;
+
+        let path = std::env::temp_dir().join(format!("eg2native-fd-{}", std::process::id()));
+        let mut file = std::fs::File::options()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&path)
+            .unwrap();
+        std::fs::remove_file(&path).unwrap(); // the open file stays usable
+        let data = vec![b'x'; 3 << 20];
+        assert_eq!(write_fd(file.as_raw_fd(), &data).unwrap(), data.len());
+        assert_eq!(write_fd(file.as_raw_fd(), b"end").unwrap(), 3); // still open
+        let mut back = Vec::new();
+        file.rewind().unwrap();
+        file.read_to_end(&mut back).unwrap();
+        assert_eq!(back.len(), data.len() + 3);
+        assert_eq!(write_fd(-1, b"x").unwrap_err().raw_os_error(), Some(9));
+    }
+}
