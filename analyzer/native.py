@@ -225,10 +225,13 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
                     write(run, binary, None if bar is None else lambda: _tick(bar, run))
                 elif fd is not None:  # the core writes each batch itself: no copy through Python
                     binary.flush()
-                    while run.write_batch(fd):
-                        if bar is not None:
-                            bar.records = run.records_written
-                            bar.tick(0.0)
+                    try:
+                        while run.write_batch(fd):
+                            if bar is not None:
+                                bar.records = run.records_written
+                                bar.tick(0.0)
+                    finally:
+                        run.finish_writing()  # its writer thread is done with the descriptor
                 else:
                     for batch in run:
                         binary.write(batch)

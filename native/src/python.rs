@@ -132,6 +132,90 @@ struct PyDecodeRun {
     buf: Vec<u8>,
     batch_bytes: usize,
     done: bool,
+    writer: Option<FdWriter>,
+}
+
+/// Batches written to a file descriptor by a thread of their own, so that decoding the next
+/// batch overlaps the kernel's copy of this one (writing hundreds of MB of JSONL costs about as
+/// much system time as decoding it). At most `IN_FLIGHT` batches wait; their buffers come back
+/// for reuse. A failed write is reported by the next call (and by `finish`).
+struct FdWriter {
+    fd: i32,
+    full: Option<std::sync::mpsc::SyncSender<Vec<u8>>>,
+    empty: std::sync::mpsc::Receiver<Vec<u8>>,
+    failed: std::sync::Arc<std::sync::Mutex<Option<io::Error>>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+const IN_FLIGHT: usize = 2;
+
+impl FdWriter {
+    fn start(fd: i32) -> FdWriter {
+        use std::sync::{mpsc, Arc, Mutex};
+        let (full, batches) = mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
+        let (give_back, empty) = mpsc::channel::<Vec<u8>>();
+        let failed = Arc::new(Mutex::new(None));
+        let slot = Arc::clone(&failed);
+        let thread = std::thread::spawn(move || {
+            for mut batch in batches {
+                if let Err(e) = write_fd(fd, &batch) {
+                    *slot.lock().expect("writer error slot") = Some(e);
+                    return; // dropping `batches`: the next send fails and says so
+                }
+                batch.clear();
+                let _ = give_back.send(batch);
+            }
+        });
+        FdWriter {
+            fd,
+            full: Some(full),
+            empty,
+            failed,
+            thread: Some(thread),
+        }
+    }
+
+    /// A buffer to fill: one the thread has written, or a new one.
+    fn buffer(&self) -> Vec<u8> {
+        self.empty.try_recv().unwrap_or_default()
+    }
+
+    fn error(&self) -> io::Result<()> {
+        match self.failed.lock().expect("writer error slot").take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Queue a batch (blocks while `IN_FLIGHT` batches wait).
+    fn send(&self, batch: Vec<u8>) -> io::Result<()> {
+        self.error()?;
+        let sent = self.full.as_ref().map(|tx| tx.send(batch));
+        match sent {
+            Some(Ok(())) => Ok(()),
+            _ => Err(self
+                .error()
+                .err()
+                .unwrap_or_else(|| io::Error::other("writer stopped"))),
+        }
+    }
+
+    /// Every queued batch written (or the first error).
+    fn finish(&mut self) -> io::Result<()> {
+        self.full = None;
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+        self.error()
+    }
+}
+
+impl Drop for FdWriter {
+    fn drop(&mut self) {
+        // the descriptor belongs to Python, which may close it right after: write what is
+        // queued first
+        let _ = self.finish();
+    }
 }
 
 #[pymethods]
@@ -174,6 +258,7 @@ impl PyDecodeRun {
             buf: Vec::new(),
             batch_bytes: batch_bytes.max(1),
             done: false,
+            writer: None,
         })
     }
 
@@ -209,24 +294,51 @@ impl PyDecodeRun {
     /// OSError from its errno (BrokenPipeError for a closed pipe, ...), as Python's own write
     /// would.
     fn write_batch(&mut self, py: Python<'_>, fd: i32) -> PyResult<usize> {
+        let as_os_error = |e: io::Error| match e.raw_os_error() {
+            Some(errno) => PyOSError::new_err((errno, strerror(errno))),
+            None => PyErr::from(e),
+        };
+        if self.writer.as_ref().is_some_and(|w| w.fd != fd) {
+            return Err(PyValueError::new_err("write_batch: one descriptor per run"));
+        }
+        let writer = self.writer.get_or_insert_with(|| FdWriter::start(fd));
         while !self.done {
-            self.buf.clear();
-            let work = NoGil((&mut self.run, &mut self.buf, self.batch_bytes));
-            let (more, written) = py.allow_threads(move || {
+            let mut buf = writer.buffer();
+            let work = NoGil((&mut self.run, &mut buf, self.batch_bytes));
+            let more = py.allow_threads(move || {
                 let (run, buf, max) = work.into_inner();
-                let more = run.next_batch(buf, max);
-                (more, write_fd(fd, buf))
+                run.next_batch(buf, max)
             });
             self.done = !more;
-            let n = written.map_err(|e| match e.raw_os_error() {
-                Some(errno) => PyOSError::new_err((errno, strerror(errno))),
-                None => PyErr::from(e),
-            })?;
+            let n = buf.len();
             if n > 0 {
+                let queued = NoGil((&*writer, buf));
+                py.allow_threads(move || {
+                    let (writer, buf) = queued.into_inner();
+                    writer.send(buf)
+                })
+                .map_err(as_os_error)?;
                 return Ok(n);
             }
         }
+        let finishing = NoGil(&mut *writer);
+        py.allow_threads(move || finishing.into_inner().finish())
+            .map_err(as_os_error)?;
         Ok(0)
+    }
+
+    /// Wait until every batch handed to `write_batch` is written (after an interrupt, before
+    /// Python flushes or closes the descriptor). A failed write raises OSError.
+    fn finish_writing(&mut self, py: Python<'_>) -> PyResult<()> {
+        let Some(writer) = self.writer.as_mut() else {
+            return Ok(());
+        };
+        let finishing = NoGil(writer);
+        py.allow_threads(move || finishing.into_inner().finish())
+            .map_err(|e| match e.raw_os_error() {
+                Some(errno) => PyOSError::new_err((errno, strerror(errno))),
+                None => PyErr::from(e),
+            })
     }
 
     /// Bytes of the input read so far (compressed bytes for .gz), for a progress bar.
