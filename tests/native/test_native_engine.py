@@ -188,8 +188,12 @@ def test_the_extension_directly(tmp_path: Path) -> None:
     rfd, wfd = os.pipe()
     os.close(rfd)
     try:
+        # a writer thread writes the batches: the failure comes with the next call, at the latest
+        # with the last (the one that says 0)
         with pytest.raises(BrokenPipeError):
-            _native.DecodeRun(str(log), "jsonl").write_batch(wfd)
+            broken = _native.DecodeRun(str(log), "jsonl", batch_bytes=4096)
+            while broken.write_batch(wfd):
+                pass
     finally:
         os.close(wfd)
     with pytest.raises(FileNotFoundError):
