@@ -228,16 +228,14 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
                     try:
                         while run.write_batch(fd):
                             if bar is not None:
-                                bar.records = run.records_written
-                                bar.tick(0.0)
+                                _tick(bar, run)
                     finally:
                         run.finish_writing()  # its writer thread is done with the descriptor
                 else:
                     for batch in run:
                         binary.write(batch)
                         if bar is not None:
-                            bar.records = run.records_written
-                            bar.tick(0.0)
+                            _tick(bar, run)
             except KeyboardInterrupt:
                 interrupted = True  # what was decoded stays written, as with the Python engine
         binary.flush()

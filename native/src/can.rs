@@ -61,7 +61,7 @@ const TAG_NONE: u32 = 2;
 /// a response whose length does not match the pending request: TAG_MISMATCH + expected length
 const TAG_MISMATCH: u32 = 16;
 
-use crate::hash::FastMap as FxMap;
+use crate::hash::FastMap;
 
 /// (operation, start address, device) of an EG2 identifier.
 pub fn unpack_id(aid: u32) -> (u32, u32, u32) {
@@ -114,7 +114,7 @@ impl Pending {
 /// request pending on its identifier. Broadcasts are never pending.
 #[derive(Default)]
 struct Directions {
-    pending: FxMap<u32, Pending>,
+    pending: FastMap<u32, Pending>,
 }
 
 impl Directions {
@@ -723,11 +723,11 @@ pub struct Eg2CanDecoder {
     devices: Option<Vec<u32>>,
     directions: Directions,
     /// frames without register values: (aid, data, tag) packed -> decode
-    memo: FxMap<u128, Template>,
+    memo: FastMap<u128, Template>,
     /// (aid << 10 | length << 6 | tag) -> the last value-carrying frame
-    last: FxMap<u64, Last>,
+    last: FastMap<u64, Last>,
     /// (CAN address << 16 | raw value) -> the decoded value
-    values: FxMap<u64, ValueEntry>,
+    values: FastMap<u64, ValueEntry>,
 }
 
 impl Eg2CanDecoder {
@@ -736,9 +736,9 @@ impl Eg2CanDecoder {
             bus,
             devices: None,
             directions: Directions::default(),
-            memo: FxMap::default(),
-            last: FxMap::default(),
-            values: FxMap::default(),
+            memo: FastMap::default(),
+            last: FastMap::default(),
+            values: FastMap::default(),
         }
     }
 
@@ -854,7 +854,7 @@ impl Eg2CanDecoder {
 
 /// A layout with the register values of one frame (Python `_fill`); `values` memoises the
 /// decoded value per (CAN address, raw value).
-fn fill(values_cache: &mut FxMap<u64, ValueEntry>, layout: &Layout, data: &[u8]) -> Template {
+fn fill(values_cache: &mut FastMap<u64, ValueEntry>, layout: &Layout, data: &[u8]) -> Template {
     // room for the extra fields, values and partial bytes: no regrowth per frame
     let mut fields = Vec::with_capacity(layout.fields.len() + 4);
     fields.extend(layout.fields.iter().cloned());

@@ -7,7 +7,7 @@
 //! Both need timestamps; records without `t` pass untouched (raw byte dumps have none).
 
 use crate::flags::{CLOSER_THAN_5MS, DURING_SAVE};
-use crate::hash::FastMap as FxMap;
+use crate::hash::FastMap;
 use crate::model::{Record, FRAME, REQUEST};
 use crate::pairing::StreamIds;
 use crate::pyfloat::py_fixed;
@@ -22,8 +22,8 @@ type Key = (u32, Option<i64>);
 #[derive(Default)]
 pub struct TimingLinter {
     streams: StreamIds,
-    last: FxMap<Key, f64>,
-    save: FxMap<Key, f64>,
+    last: FastMap<Key, f64>,
+    save: FastMap<Key, f64>,
 }
 
 impl TimingLinter {

@@ -17,7 +17,7 @@ use crate::registers::{by_modbus, by_number, is_save_register, RegRef, Register,
 
 pub const SHORT_NOTE: &str = "the host leaves out the 1000 offset, as some clients do";
 
-pub use crate::hash::FastMap as IntMap;
+use crate::hash::FastMap;
 
 /// The register at a full (1000-numbered) number; a placeholder where the map has none
 /// (`_register`).
@@ -294,7 +294,7 @@ pub struct CellValue {
 /// pure caches: their contents never change what a frame says). Register values live in a
 /// direct-mapped cache: a polling loop finds its values there without hashing or formatting.
 pub struct Memo {
-    plans: IntMap<(u16, u16), Rc<Plan>>,
+    plans: FastMap<(u16, u16), Rc<Plan>>,
     last_plan: Option<((u16, u16), Rc<Plan>)>,
     cells: Vec<Option<CellValue>>,
 }
@@ -307,7 +307,7 @@ const CELL_SLOTS: usize = 1 << 13;
 impl Default for Memo {
     fn default() -> Self {
         Memo {
-            plans: IntMap::default(),
+            plans: FastMap::default(),
             last_plan: None,
             cells: (0..CELL_SLOTS).map(|_| None).collect(),
         }

@@ -28,7 +28,7 @@ fn one_outstanding(protocol: &str) -> bool {
 
 // -- small keyed maps ------------------------------------------------------------------------
 
-use crate::hash::{FastMap as FxMap, FastSet as FxSet};
+use crate::hash::{FastMap, FastSet};
 
 /// Numbers the (bus, protocol) pairs seen, so keys that start with them (the Python tuples
 /// `(rec.bus, rec.protocol, ...)`) are small integers. A decoder gives all its records the
@@ -141,9 +141,9 @@ pub struct Pairer {
     held: VecDeque<Held>,
     /// ticket the next record entering the hold gets; held[0] has `next_ticket - held.len()`
     next_ticket: u64,
-    pending: FxMap<Key, Copies>,
+    pending: FastMap<Key, Copies>,
     /// keys whose first copy got its answer
-    answered: FxSet<Key>,
+    answered: FastSet<Key>,
     next_expiry: f64,
     seq: i64,
     streams: StreamIds,
@@ -171,8 +171,8 @@ impl Pairer {
             held_bytes: 0,
             held: VecDeque::new(),
             next_ticket: 0,
-            pending: FxMap::default(),
-            answered: FxSet::default(),
+            pending: FastMap::default(),
+            answered: FastSet::default(),
             next_expiry: f64::INFINITY,
             seq: 0,
             streams: StreamIds::default(),
