@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Final
 
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from decoders import eg2_serial
 from decoders.model import EG2_CAN, EG2_SERIAL, FOREIGN_CAN, MODBUS_RTU
@@ -169,7 +170,17 @@ def mm_table() -> pa.Array:
     return pa.array([opening_mm(v) for v in range(1 << 16)], FLOAT)
 
 
-def _field(name: str, type_: pa.DataType, unit: str = "", description: str = "") -> pa.Field:
+def millimetres(opening: pa.Array | pa.ChunkedArray) -> pa.Array | pa.ChunkedArray:
+    """Opening values in millimetres, as ``opening_mm`` gives them (null outside 0-65535)."""
+    table = mm_table()
+    inside = pc.and_(pc.greater_equal(opening, 0), pc.less(opening, len(table)))
+    return pc.take(table, pc.if_else(inside, opening, None))
+
+
+def described_field(
+    name: str, type_: pa.DataType, unit: str = "", description: str = ""
+) -> pa.Field:
+    """A column with its unit and meaning in the field's metadata (``unit``, ``description``)."""
     meta = {}
     if unit:
         meta[b"unit"] = unit.encode()
@@ -195,11 +206,11 @@ def _family_columns() -> list[tuple[pa.Field, Path]]:
             path = (parse_key(family), col.key)
             if pa.types.is_struct(col.type):
                 out += [
-                    (_field(f"{family}_{col.key}_{c.name}", c.type), (*path, c.name))
+                    (described_field(f"{family}_{col.key}_{c.name}", c.type), (*path, c.name))
                     for c in col.type.fields
                 ]
             else:
-                out.append((_field(f"{family}_{col.key}", col.type, col.unit), path))
+                out.append((described_field(f"{family}_{col.key}", col.type, col.unit), path))
     return out
 
 
@@ -207,15 +218,15 @@ def _register_fields() -> list[pa.Field]:
     out = []
     for r in REGISTERS:
         unit = UNITS.get(r.unit, r.unit)
-        out.append(_field(r.name, INT, unit, f"{r.number} {r.key}: {r.meaning}"))
+        out.append(described_field(r.name, INT, unit, f"{r.number} {r.key}: {r.meaning}"))
         if r.unit == "mm":
-            out.append(_field(r.name + MM_SUFFIX, FLOAT, MM, f"{r.number} {r.key} in mm"))
+            out.append(described_field(r.name + MM_SUFFIX, FLOAT, MM, f"{r.number} {r.key} in mm"))
     return out
 
 
-_RECORD: Final = [(_field(name, t, unit), (name,)) for name, t, unit in RECORD_COLUMNS]
+_RECORD: Final = [(described_field(name, t, unit), (name,)) for name, t, unit in RECORD_COLUMNS]
 _FAMILY: Final = _family_columns()
-_OTHER: Final = (_field(OTHER_FIELDS, STR, description="JSON: fields held by no column"),)
+_OTHER: Final = (described_field(OTHER_FIELDS, STR, description="JSON: fields held by no column"),)
 
 #: the columns of every Parquet file ``eg2scope decode --format parquet`` writes
 SCHEMA: Final = pa.schema(

@@ -41,6 +41,11 @@ class LatencyHistogram:
                 return min(self.max, math.exp((bucket + 0.5) * _LOG_STEP))
         return self.max
 
+    def merge(self, other: LatencyHistogram) -> None:
+        self.buckets.update(other.buckets)
+        self.count += other.count
+        self.max = max(self.max, other.max)
+
     def summary(self) -> dict[str, float | None]:
         def r(x: float | None) -> float | None:
             return None if x is None else round(x, 3)
@@ -50,6 +55,9 @@ class LatencyHistogram:
             "p95_ms": r(self.percentile(95)),
             "max_ms": r(self.max) if self.count else None,
         }
+
+
+COUNT_NAMES = ("requests", "responses", "unanswered", "retransmissions", "errors", "warnings")
 
 
 @dataclass
@@ -79,6 +87,11 @@ class Counts:
         if rec.warnings:
             self.warnings += 1
 
+    def merge(self, other: Counts) -> None:
+        for name in COUNT_NAMES:
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.latency.merge(other.latency)
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "requests": self.requests,
@@ -106,6 +119,13 @@ class CaptureStats:
         self.unanswered_ids: dict[tuple[str, str], set[int]] = {}
         self.first_t: float | None = None
         self.last_t: float | None = None
+
+    def totals(self) -> Counts:
+        """The devices' counts added up, latency included (the Devices table's total)."""
+        total = Counts()
+        for counts in self.devices.values():
+            total.merge(counts)
+        return total
 
     def add(self, rec: Record) -> None:
         self.records += 1

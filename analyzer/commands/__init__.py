@@ -15,4 +15,5 @@ SUBCOMMANDS: tuple[str, ...] = (
     "demo",
     "plot",
     "tui",
+    "batch",
 )

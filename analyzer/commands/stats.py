@@ -13,6 +13,7 @@ from rich.table import Table
 from decoders.flags import DESCRIPTIONS
 
 from ..sinks.stats import StatsListener
+from ..stats import COUNT_NAMES
 from .common import CaptureOptions, add_input_arguments, finish_capture, run_capture
 from .decode import EXIT_CODES
 
@@ -37,9 +38,6 @@ def add_subparser(sub: Any) -> None:
         help="text tables (default) or one JSON object",
     )
     parser.set_defaults(func=run)
-
-
-COUNT_COLUMNS = ("requests", "responses", "unanswered", "retransmissions", "errors", "warnings")
 
 
 def _ms(x: float | None) -> str:
@@ -76,7 +74,7 @@ def print_tables(path: str, data: dict[str, Any]) -> None:
         table = Table(title=title, title_justify="left")
         for col in ("bus", "protocol", "device", *([key] if key else [])):
             table.add_column(col, no_wrap=True)
-        for col in COUNT_COLUMNS:
+        for col in COUNT_NAMES:
             table.add_column(col, justify="right")
         for col in ("p50 ms", "p95 ms", "max ms"):
             table.add_column(col, justify="right")
@@ -86,7 +84,7 @@ def print_tables(path: str, data: dict[str, Any]) -> None:
                 row["protocol"],
                 str(row["device"]),
                 *([row[key]] if key else []),
-                *(str(row[c]) for c in COUNT_COLUMNS),
+                *(str(row[c]) for c in COUNT_NAMES),
                 _ms(row["p50_ms"]),
                 _ms(row["p95_ms"]),
                 _ms(row["max_ms"]),

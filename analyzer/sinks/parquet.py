@@ -51,7 +51,7 @@ from ..parquet_schema import (
     VALUES_KEY,
     Path,
     family_struct,
-    mm_table,
+    millimetres,
     parse_key,
 )
 
@@ -281,9 +281,7 @@ def _single_writes(leaves: dict[Path, pa.ChunkedArray]) -> set[str]:
 def _millimetres(opening: pa.ChunkedArray) -> pa.ChunkedArray:
     if opening.null_count == len(opening):
         return _nulls(len(opening), FLOAT)
-    table = mm_table()
-    inside = pc.and_(pc.greater_equal(opening, 0), pc.less(opening, len(table)))
-    return pc.take(table, pc.if_else(inside, opening, None))
+    return millimetres(opening)
 
 
 def flatten(leaves: dict[Path, pa.ChunkedArray], rows: int) -> pa.Table:
@@ -317,48 +315,25 @@ def jsonl_to_table(batch: bytes) -> pa.Table:
 # -- writing ------------------------------------------------------------------------------------
 
 
-class ParquetRecordWriter:
-    """Takes JSONL bytes in any pieces, writes row groups of ``ROW_GROUP_ROWS`` as they fill."""
+class RowGroupWriter:
+    """One Parquet file written a row group of ``ROW_GROUP_ROWS`` at a time: tables of any size
+    in, memory flat. The records output and the fleet dataset's partitions use it."""
 
-    def __init__(self, out: str | IO[bytes]) -> None:
+    def __init__(
+        self, out: str | IO[bytes], schema: pa.Schema = SCHEMA, dictionary: tuple[str, ...] = ()
+    ) -> None:
         self.writer = pq.ParquetWriter(
             out,
-            SCHEMA,
+            schema,
             compression=COMPRESSION,
             compression_level=COMPRESSION_LEVEL,
-            use_dictionary=DICTIONARY,
+            use_dictionary=[c for c in (*DICTIONARY, *dictionary) if c in schema.names],
         )
-        self.text: list[bytes] = []  # JSONL not parsed yet
-        self.text_bytes = 0
-        self.tables: list[pa.Table] = []  # parsed, not written yet
+        self.tables: list[pa.Table] = []  # not written yet
         self.table_rows = 0
         self.rows = 0  # written
 
-    def write_jsonl(self, batch: bytes) -> None:
-        self.text.append(batch)
-        self.text_bytes += len(batch)
-        if self.text_bytes >= PARSE_BYTES:
-            self._parse(final=False)
-
-    def write_parsed(self, parsed: pa.Table) -> None:
-        """Records already in Arrow, laid out as ``PARSE_SCHEMA`` (the JSONL keys, ``fields``
-        as ``fields_serial``, ``fields_modbus`` or ``fields_can``): the way for a producer that
-        builds Arrow itself to skip JSON (JSONL given before must be whole lines)."""
-        self._parse(final=True, write=False)
-        leaves = _leaves(parsed)
-        unknown = leaves.keys() - KNOWN_PATHS
-        if unknown:
-            raise ValueError(f"no column holds {', '.join('.'.join(p) for p in sorted(unknown))}")
-        self._add(flatten(leaves, parsed.num_rows))
-
-    def _parse(self, final: bool, write: bool = True) -> None:
-        text = b"".join(self.text)
-        cut = len(text) if final else text.rfind(b"\n") + 1  # a line may be on its way
-        self.text = [text[cut:]] if cut < len(text) else []
-        self.text_bytes = len(text) - cut
-        self._add(jsonl_to_table(text[:cut]), final and write)
-
-    def _add(self, table: pa.Table, final: bool = False) -> None:
+    def add(self, table: pa.Table, final: bool = False) -> None:
         if table.num_rows:
             self.tables.append(table)
             self.table_rows += table.num_rows
@@ -376,14 +351,78 @@ class ParquetRecordWriter:
 
     def close(self) -> None:
         """Write what is left and the footer."""
-        self._parse(final=True)
+        self.add(SCHEMA.empty_table(), final=True)
         self.writer.close()
 
     def abandon(self) -> None:
         """Writing failed: drop what is held and write nothing more, not even the footer when
         the writer is collected (the output is discarded, or is closed already)."""
-        self.text, self.tables = [], []
+        self.tables = []
         self.writer.is_open = False
+
+
+class JsonlTables:
+    """JSONL records in any pieces in, tables in the Parquet columns (``SCHEMA``) out to
+    ``add``, a parse of ``PARSE_BYTES`` at a time."""
+
+    def __init__(self) -> None:
+        self.text: list[bytes] = []  # JSONL not parsed yet
+        self.text_bytes = 0
+
+    def add(self, table: pa.Table, final: bool = False) -> None:
+        raise NotImplementedError
+
+    def write_jsonl(self, batch: bytes) -> None:
+        self.text.append(batch)
+        self.text_bytes += len(batch)
+        if self.text_bytes >= PARSE_BYTES:
+            self._parse(final=False)
+
+    def write_parsed(self, parsed: pa.Table) -> None:
+        """Records already in Arrow, laid out as ``PARSE_SCHEMA`` (the JSONL keys, ``fields``
+        as ``fields_serial``, ``fields_modbus`` or ``fields_can``): the way for a producer that
+        builds Arrow itself to skip JSON (JSONL given before must be whole lines)."""
+        self.flush_text(final=False)
+        leaves = _leaves(parsed)
+        unknown = leaves.keys() - KNOWN_PATHS
+        if unknown:
+            raise ValueError(f"no column holds {', '.join('.'.join(p) for p in sorted(unknown))}")
+        self.add(flatten(leaves, parsed.num_rows))
+
+    def flush_text(self, final: bool) -> None:
+        """Parse the JSONL held (``final``: and write everything held)."""
+        self._parse(final=True, write=final)
+
+    def _parse(self, final: bool, write: bool = True) -> None:
+        text = b"".join(self.text)
+        cut = len(text) if final else text.rfind(b"\n") + 1  # a line may be on its way
+        self.text = [text[cut:]] if cut < len(text) else []
+        self.text_bytes = len(text) - cut
+        self.add(jsonl_to_table(text[:cut]), final and write)
+
+
+class ParquetRecordWriter(JsonlTables):
+    """Takes JSONL bytes in any pieces, writes row groups of ``ROW_GROUP_ROWS`` as they fill."""
+
+    def __init__(self, out: str | IO[bytes]) -> None:
+        super().__init__()
+        self.groups = RowGroupWriter(out)
+
+    @property
+    def rows(self) -> int:
+        return self.groups.rows
+
+    def add(self, table: pa.Table, final: bool = False) -> None:
+        self.groups.add(table, final)
+
+    def close(self) -> None:
+        """Write what is left and the footer."""
+        self.flush_text(final=True)
+        self.groups.close()
+
+    def abandon(self) -> None:
+        self.text = []
+        self.groups.abandon()
 
 
 def write_jsonl_batches(batches: Iterable[bytes], out: str | IO[bytes]) -> int:

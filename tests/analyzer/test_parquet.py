@@ -425,7 +425,7 @@ def test_row_groups_are_written_as_they_fill(
     held = []
     for line in jsonl.splitlines(keepends=True):
         writer.write_jsonl(line)
-        held.append(writer.table_rows)
+        held.append(writer.groups.table_rows)
     written_before_close = writer.rows
     writer.close()
     meta = pq.ParquetFile(path).metadata

@@ -1,0 +1,157 @@
+"""``eg2scope batch CAPTURES... -o DATASET``: decode many captures into one Parquet dataset, on
+this machine's cores or a Dask cluster (analyzer/fleet)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+from pathlib import Path
+from typing import Any
+
+from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
+from .common import positive_int, protocol_type
+
+INSTALL_HINT = "pip install 'eg2scope[fleet]'"
+
+
+def add_subparser(sub: Any) -> None:
+    parser = sub.add_parser(
+        "batch",
+        help="decode many captures into one Parquet dataset (Dask for many cores or machines)",
+        description=(
+            "Decode a fleet's captures (eg2scope .mcap recordings, candump logs, python-can "
+            "logs, raw serial dumps) into one Parquet dataset that pandas, polars and DuckDB "
+            "read directly: records/ (every record, the columns of 'decode --format parquet' "
+            "plus capture_path and capture_hash), states/ (every state sample) and captures/ "
+            "(one row per capture: counts, latency, damage), partitioned by day and bus. A "
+            "capture the dataset holds already (same sha256) is skipped, so a run that was "
+            "interrupted finishes the rest when run again; --force decodes everything again. "
+            "See docs/fleet.md."
+        ),
+        epilog=(
+            "examples:\n"
+            "  eg2scope batch 'site-a/**/*.mcap' 'site-b/**/*.log' -o fleet/\n"
+            "  eg2scope batch captures/ -o fleet/ --scheduler tcp://dask-scheduler:8786\n"
+            "  eg2scope batch captures/ -o fleet/ --workers 1\n\n"
+            "Dask is an optional extra: " + INSTALL_HINT + " (--workers 1 needs no Dask).\n\n"
+            "exit status: 0 every capture decoded; 1 a capture could not be read or written "
+            "(the others are in the dataset); 2 usage error; 3 some capture is damaged (decoded "
+            "as far as possible, marked in captures/); 130 interrupted (run again to finish)"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="CAPTURES",
+        help="capture files, folders (searched recursively for capture suffixes: .mcap, .log, "
+        ".log.gz, .asc, .blf, .trc, .csv, .mf4, .bin, .raw, .dump) or glob patterns in quotes "
+        "('site-a/**/*.mcap')",
+    )
+    parser.add_argument("--output", "-o", required=True, metavar="DIR", help="the dataset folder")
+    parser.add_argument(
+        "--workers",
+        type=positive_int,
+        metavar="N",
+        help="Dask worker processes on this machine (default: one per core); 1: decode in "
+        "this process, one capture after the other, without Dask",
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on an existing Dask cluster (tcp://host:8786); its workers must see the "
+        "captures and the dataset folder at the same paths",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="decode every capture again, even those in the dataset"
+    )
+    parser.add_argument(
+        "--protocol",
+        "-p",
+        type=protocol_type,
+        default=None,
+        metavar="NAME",
+        help="byte-stream protocol of raw dumps: serial, modbus or auto (default: detected "
+        "per file)",
+    )
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="where the local Dask scheduler and workers listen (default 127.0.0.1: this "
+        "machine only)",
+    )
+    parser.add_argument(
+        "--dashboard-address",
+        default="127.0.0.1:8787",
+        metavar="HOST:PORT",
+        help="the local Dask dashboard (default 127.0.0.1:8787, another port if taken; "
+        "'none': no dashboard)",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    parser.set_defaults(func=run)
+
+
+def _dask_installed() -> bool:
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _check(args: argparse.Namespace) -> None:
+    if args.scheduler and args.workers:
+        raise UsageError("--workers is for a local cluster; a --scheduler's cluster has its own")
+    uses_dask = args.scheduler is not None or args.workers != 1
+    if uses_dask and not _dask_installed():
+        raise UsageError(
+            f"batch on several workers needs Dask, which is not installed: {INSTALL_HINT}, "
+            "or run it in one process with --workers 1"
+        )
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"the output {args.output} is a file; batch writes a dataset folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from ..fleet import layout
+    from ..fleet.inputs import expand
+    from ..fleet.progress import BatchProgress, print_summary
+    from ..fleet.runner import DaskOptions, Tally, default_workers, plan, run_in_loop, run_on_dask
+
+    _check(args)
+    root = Path(args.output).resolve()
+    paths = expand(args.inputs, exclude=root)
+    if not paths:
+        raise UsageError(f"no captures in {', '.join(args.inputs)}")
+    tally = Tally()
+    dashboard = None if args.dashboard_address.lower() == "none" else args.dashboard_address
+    options = DaskOptions(args.workers or default_workers(), args.scheduler, args.host, dashboard)
+    show = not args.no_progress and sys.stderr.isatty()
+    try:
+        with layout.run_lock(root):
+            jobs, skipped = plan(paths, root, args.protocol, args.force)
+            with BatchProgress(len(paths), tally, show) as progress:
+                for result in skipped:
+                    progress.report(result)
+                if options.scheduler is None and options.workers == 1:
+                    run_in_loop(jobs, progress.report)
+                elif jobs:
+                    run_on_dask(jobs, options, progress.report, progress.cluster_started)
+    except layout.DatasetLocked as exc:
+        raise UsageError(str(exc)) from None
+    except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # one Ctrl-C is enough: finish saying so
+        done = tally.count("done", "damaged", "skipped")
+        print(
+            f"eg2scope: interrupted: {done} of {len(paths)} captures are in {root}; run the "
+            "same command again to finish the rest",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    print_summary(tally, str(root))
+    if tally.count("unreadable", "failed"):
+        return EXIT_ERROR
+    return EXIT_DAMAGED if tally.count("damaged") else EXIT_OK

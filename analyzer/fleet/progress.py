@@ -1,0 +1,93 @@
+"""What a batch run shows: a progress bar on stderr (captures done, records, rate, errors) while it
+runs, one line per capture that went wrong, and a summary table at the end."""
+
+from __future__ import annotations
+
+import sys
+from types import TracebackType
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from .capture_task import DAMAGED, DONE, FAILED, SKIPPED, UNREADABLE, CaptureResult
+from .runner import Tally
+
+_STYLE = {DAMAGED: "yellow", UNREADABLE: "red", FAILED: "red"}
+
+
+class BatchProgress:
+    """The run's progress bar; ``report`` is given each capture's result as it completes."""
+
+    def __init__(self, total: int, tally: Tally, show: bool) -> None:
+        self.tally = tally
+        self.console = Console(stderr=True, highlight=False)
+        self.progress = Progress(
+            TextColumn("[bold]captures"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[records]:>12,} records  {task.fields[rate]:>9,.0f}/s"),
+            TextColumn("{task.fields[errors]:,} errors"),
+            TimeElapsedColumn(),
+            console=self.console,
+            transient=True,
+            disable=not show,
+        )
+        self.task = self.progress.add_task("", total=total, records=0, rate=0.0, errors=0)
+
+    def __enter__(self) -> BatchProgress:
+        self.progress.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.progress.stop()
+
+    def cluster_started(self, client: Any) -> None:
+        """Say where the Dask dashboard is (once the cluster is up)."""
+        link = getattr(client, "dashboard_link", None)
+        workers = len(client.scheduler_info().get("workers", {}))
+        where = f"; dashboard: {link}" if link else ""
+        self.console.print(f"eg2scope: Dask: {workers} workers{where}", highlight=False)
+
+    def report(self, result: CaptureResult) -> None:
+        tally = self.tally
+        tally.add(result)
+        if result.status in _STYLE:
+            self.console.print(
+                f"eg2scope: {result.path}: {result.status}: {result.message}",
+                style=_STYLE[result.status],
+                soft_wrap=True,
+            )
+        rate = tally.records / tally.elapsed if tally.elapsed > 0 else 0.0
+        self.progress.update(
+            self.task, advance=1, records=tally.records, rate=rate, errors=tally.errors
+        )
+
+
+def print_summary(tally: Tally, root: str) -> None:
+    """The summary table (stdout: it is what the command made)."""
+    console = Console(highlight=False, width=None if sys.stdout.isatty() else 120)
+    table = Table(title=f"eg2scope batch -> {root}", title_justify="left")
+    for col in ("captures", "count"):
+        table.add_column(col, justify="right" if col == "count" else "left")
+    for status, meaning in (
+        (DONE, "decoded"),
+        (DAMAGED, "decoded, damaged"),
+        (SKIPPED, "already in the dataset"),
+        (UNREADABLE, "unreadable"),
+        (FAILED, "failed"),
+    ):
+        table.add_row(meaning, f"{tally.count(status):,}")
+    console.print(table)
+    seconds = tally.elapsed
+    rate = tally.records / seconds if seconds > 0 else 0.0
+    console.print(
+        f"{tally.records:,} records ({tally.frames:,} frames, {tally.errors:,} errors) "
+        f"in {seconds:.1f} s: {rate:,.0f} records/s"
+    )

@@ -1,0 +1,174 @@
+"""Running a batch: which captures need decoding, then each one through ``decode_capture``, in
+this process (``--workers 1``) or on Dask (a LocalCluster of this machine's cores, or a cluster
+the user names), with a progress bar and a summary.
+
+Dask gets one task per capture. A task that dies with its worker is retried by the scheduler
+(that is safe: ``capture_task``); one that keeps killing workers ends as FAILED, and the rest go
+on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import logging
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pyarrow.dataset as ds
+
+from ..sources.capture import CAPTURE_READERS, RAW_BYTES
+from . import layout
+from .capture_task import (
+    DAMAGED,
+    FAILED,
+    SKIPPED,
+    UNREADABLE,
+    CaptureJob,
+    CaptureResult,
+    decode_capture,
+)
+from .tables import HASH, PATH
+
+Report = Callable[[CaptureResult], None]
+
+
+@dataclass(frozen=True)
+class DaskOptions:
+    workers: int  # for a LocalCluster
+    scheduler: str | None = None  # an existing cluster: its scheduler's address
+    host: str = "127.0.0.1"  # where a LocalCluster's scheduler and workers listen
+    dashboard: str | None = "127.0.0.1:8787"  # None: no dashboard
+
+
+def plan(
+    paths: Iterable[Path], root: Path, protocol: str | None, force: bool
+) -> tuple[list[CaptureJob], list[CaptureResult]]:
+    """The jobs to run, and the captures skipped without reading them: a path whose size and
+    modification time match its row in ``captures/`` has the same content (as make and rsync
+    assume); anything else is hashed by its task."""
+    known = {} if force else _known(root)
+    jobs, skipped = [], []
+    for path in paths:
+        stat = path.stat()
+        digest = known.get((str(path), stat.st_size, stat.st_mtime_ns // 1000))
+        if digest is not None:
+            skipped.append(CaptureResult(str(path), SKIPPED, digest, message="unchanged"))
+        else:
+            jobs.append(CaptureJob(str(path), str(root), protocol, force))
+    return jobs, skipped
+
+
+def _known(root: Path) -> dict[tuple[str, int, int], str]:
+    """(path, size, mtime) -> content hash, of the captures the dataset holds."""
+    files = sorted((root / layout.CAPTURES).glob("day=*/*.parquet"))
+    if not files:
+        return {}
+    columns = [PATH, HASH, "size", "mtime"]
+    table = ds.dataset([str(f) for f in files], format="parquet").to_table(columns=columns)
+    table = table.set_column(3, "mtime", table.column("mtime").cast("int64"))
+    rows = table.to_pydict()
+    return {
+        (p, s, m): h
+        for p, h, s, m in zip(rows[PATH], rows[HASH], rows["size"], rows["mtime"], strict=True)
+    }
+
+
+def run_in_loop(jobs: list[CaptureJob], report: Report) -> None:
+    """Every capture in this process, one after the other (no Dask needed)."""
+    _import_readers()
+    for job in jobs:
+        report(decode_capture(job))
+
+
+def _import_readers() -> None:
+    """Import every capture reader now, not at its format's first file: CPython 3.11 takes a
+    Ctrl-C that lands inside an import's generated code (dataclasses) as unhandled and ends
+    the process by SIGINT at exit, even though the batch handled it and said so."""
+    for target in {*CAPTURE_READERS.values(), RAW_BYTES}:
+        importlib.import_module(target.partition(":")[0])
+
+
+def run_on_dask(
+    jobs: list[CaptureJob],
+    options: DaskOptions,
+    report: Report,
+    started: Callable[[Any], None] | None = None,
+) -> None:
+    """Every capture as a Dask task, results reported as they complete (``started``: given the
+    client once the cluster is up)."""
+    from dask.distributed import as_completed
+
+    with _client(options) as client:
+        if started is not None:
+            started(client)
+        futures = client.map(decode_capture, jobs, pure=False)
+        by_key = {f.key: job for f, job in zip(futures, jobs, strict=True)}
+        for future in as_completed(futures):
+            report(_result(future, by_key[future.key]))
+
+
+def _result(future: Any, job: CaptureJob) -> CaptureResult:
+    try:
+        return future.result()
+    except Exception as exc:  # the task kept killing its workers, or the cluster went away
+        return CaptureResult(job.path, FAILED, message=f"{type(exc).__name__}: {exc}")
+
+
+@contextlib.contextmanager
+def _client(options: DaskOptions) -> Iterator[Any]:
+    from dask.distributed import Client, LocalCluster
+
+    if options.scheduler is not None:
+        with Client(options.scheduler) as client:
+            yield client
+        return
+    with (
+        LocalCluster(
+            n_workers=options.workers,
+            threads_per_worker=1,  # the decoders hold the GIL: processes, not threads
+            processes=True,
+            host=options.host,
+            dashboard_address=options.dashboard,
+            worker_dashboard_address=None,
+            silence_logs=logging.ERROR,  # not a warning per task cancelled by Ctrl-C
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+class Tally:
+    """Counts for the progress bar and the summary."""
+
+    def __init__(self) -> None:
+        self.started = time.perf_counter()
+        self.results: list[CaptureResult] = []
+        self.records = 0
+        self.frames = 0
+        self.errors = 0
+
+    def add(self, result: CaptureResult) -> None:
+        self.results.append(result)
+        self.records += result.records
+        self.frames += result.frames
+        self.errors += result.errors
+
+    def count(self, *statuses: str) -> int:
+        return sum(r.status in statuses for r in self.results)
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.started
+
+    def problems(self) -> list[CaptureResult]:
+        return [r for r in self.results if r.status in (DAMAGED, UNREADABLE, FAILED)]
