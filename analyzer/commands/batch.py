@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ def add_subparser(sub: Any) -> None:
     parser = sub.add_parser(
         "batch",
         help="decode many captures into one Parquet dataset (Dask for many cores or machines)",
-        description=(
+        description=textwrap.fill(
             "Decode a fleet's captures (eg2scope .mcap recordings, candump logs, python-can "
             "logs, raw serial dumps) into one Parquet dataset that pandas, polars and DuckDB "
             "read directly: records/ (every record, the columns of 'decode --format parquet' "
@@ -26,17 +27,24 @@ def add_subparser(sub: Any) -> None:
             "(one row per capture: counts, latency, damage), partitioned by day and bus. A "
             "capture the dataset holds already (same sha256) is skipped, so a run that was "
             "interrupted finishes the rest when run again; --force decodes everything again. "
-            "See docs/fleet.md."
+            "See docs/fleet.md.",
+            width=88,
         ),
         epilog=(
             "examples:\n"
             "  eg2scope batch 'site-a/**/*.mcap' 'site-b/**/*.log' -o fleet/\n"
             "  eg2scope batch captures/ -o fleet/ --scheduler tcp://dask-scheduler:8786\n"
             "  eg2scope batch captures/ -o fleet/ --workers 1\n\n"
-            "Dask is an optional extra: " + INSTALL_HINT + " (--workers 1 needs no Dask).\n\n"
-            "exit status: 0 every capture decoded; 1 a capture could not be read or written "
-            "(the others are in the dataset); 2 usage error; 3 some capture is damaged (decoded "
-            "as far as possible, marked in captures/); 130 interrupted (run again to finish)"
+            "Dask is an optional extra: "
+            + INSTALL_HINT
+            + " (--workers 1 needs no Dask).\n\n"
+            + textwrap.fill(
+                "exit status: 0 every capture decoded; 1 a capture could not be read or "
+                "written (the others are in the dataset); 2 usage error; 3 some capture is "
+                "damaged (decoded as far as possible, marked in captures/); 130 interrupted "
+                "(run again to finish)",
+                width=88,
+            )
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

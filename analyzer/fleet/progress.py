@@ -53,7 +53,8 @@ class BatchProgress:
         link = getattr(client, "dashboard_link", None)
         workers = len(client.scheduler_info().get("workers", {}))
         where = f"; dashboard: {link}" if link else ""
-        self.console.print(f"eg2scope: Dask: {workers} workers{where}", highlight=False)
+        noun = "worker" if workers == 1 else "workers"
+        self.console.print(f"eg2scope: Dask: {workers} {noun}{where}", highlight=False)
 
     def report(self, result: CaptureResult) -> None:
         tally = self.tally

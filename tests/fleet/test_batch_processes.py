@@ -189,3 +189,32 @@ def test_without_dask_it_says_how_to_install_and_one_worker_still_works(
     done = run(str(fleet[0]), "--workers", "1")
     assert done.returncode == 0, done.stderr
     assert layout.done_hashes(tmp_path / "d") == {content_hash(fleet[0])}
+
+
+def test_an_existing_cluster_named_by_its_scheduler(fleet: list[Path], tmp_path: Path) -> None:
+    from dask.distributed import LocalCluster
+
+    root = tmp_path / "d"
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        done = subprocess.run(
+            [
+                *BATCH,
+                *map(str, fleet[:3]),
+                "-o",
+                str(root),
+                "--scheduler",
+                cluster.scheduler_address,
+                "--no-progress",
+            ],
+            capture_output=True,
+            text=True,
+            env=ENV,
+            cwd=ROOT,
+            timeout=300,
+        )
+    assert done.returncode == 0, done.stderr
+    assert "Dask: 1 worker" in done.stderr
+    assert summary_count(done.stdout, "decoded") == 3
+    assert_complete_without_duplicates(root, fleet[:3])
