@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
-from .common import positive_int, protocol_type
+from .common import add_protocol_argument, positive_int
 
 INSTALL_HINT = "pip install 'eg2scope[fleet]'"
 
@@ -73,15 +73,7 @@ def add_subparser(sub: Any) -> None:
     parser.add_argument(
         "--force", action="store_true", help="decode every capture again, even those in the dataset"
     )
-    parser.add_argument(
-        "--protocol",
-        "-p",
-        type=protocol_type,
-        default=None,
-        metavar="NAME",
-        help="byte-stream protocol of raw dumps: serial, modbus or auto (default: detected "
-        "per file)",
-    )
+    add_protocol_argument(parser)
     parser.add_argument(
         "--host",
         default="127.0.0.1",

@@ -81,13 +81,7 @@ def speed_type(text: str) -> float | None:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_input_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "file",
-        help="capture to read: candump -L .log (also .log.gz), python-can "
-        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
-        "serial bytes",
-    )
+def add_protocol_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--protocol",
         "-p",
@@ -98,6 +92,16 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
         "auto (default: detected from the bytes). CAN is chosen by the file: CAN captures "
         "are always decoded as CAN.",
     )
+
+
+def add_input_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "file",
+        help="capture to read: candump -L .log (also .log.gz), python-can "
+        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
+        "serial bytes",
+    )
+    add_protocol_argument(parser)
     parser.add_argument(
         "--bus",
         metavar="NAME",

@@ -4,20 +4,20 @@ runs, one line per capture that went wrong, and a summary table at the end."""
 from __future__ import annotations
 
 import sys
-from types import TracebackType
 from typing import Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from ..lifecycle import Running
 from .capture_task import DAMAGED, DONE, FAILED, SKIPPED, UNREADABLE, CaptureResult
 from .runner import Tally
 
 _STYLE = {DAMAGED: "yellow", UNREADABLE: "red", FAILED: "red"}
 
 
-class BatchProgress:
+class BatchProgress(Running):
     """The run's progress bar; ``report`` is given each capture's result as it completes."""
 
     def __init__(self, total: int, tally: Tally, show: bool) -> None:
@@ -36,16 +36,10 @@ class BatchProgress:
         )
         self.task = self.progress.add_task("", total=total, records=0, rate=0.0, errors=0)
 
-    def __enter__(self) -> BatchProgress:
+    def start(self) -> None:
         self.progress.start()
-        return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def stop(self) -> None:
         self.progress.stop()
 
     def cluster_started(self, client: Any) -> None:
