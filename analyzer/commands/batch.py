@@ -144,10 +144,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     except KeyboardInterrupt:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # one Ctrl-C is enough: finish saying so
-        done = tally.count("done", "damaged", "skipped")
+        held = len(layout.done_hashes(root))  # the last results may not have been reported
         print(
-            f"eg2scope: interrupted: {done} of {len(paths)} captures are in {root}; run the "
-            "same command again to finish the rest",
+            f"eg2scope: interrupted: {root} holds {held} complete captures; run the same "
+            "command again to finish the rest",
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
