@@ -17,8 +17,10 @@ Modbus), or on the same CAN identifier, still means the waiting ones were not an
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from collections.abc import Iterable
+from itertools import count
 from typing import Any
 
 from .flags import ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED
@@ -29,6 +31,9 @@ from .model import EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 ONE_OUTSTANDING = frozenset({EG2_SERIAL, MODBUS_RTU})
 
 RETRANSMITTED = "retransmission: the same request again before the first was answered"
+# _expire takes from the heap every request due by now plus this, then applies the exact test
+# (now - t > limit): t + limit and now - t may round differently by a few ulps
+_DUE_SLACK_S = 1e-3
 
 
 def _flag(rec: Record, code: str, text: str) -> None:
@@ -66,6 +71,12 @@ class Pairer:
         self._answered: set[tuple[Any, ...]] = set()  # keys whose first copy got its answer
         self._waiting: set[int] = set()  # id() of the pending requests
         self._next_expiry = float("inf")  # earliest stream time a pending request times out
+        # (t + limit, arrival, t, limit, key, request) of every pending request with a time, in
+        # time-out order: expiring looks at the requests that are due, not at every one waiting
+        # (thousands wait on a CAN bus whose gripper is gone). Entries of requests answered or
+        # dropped meanwhile stay until they reach the top.
+        self._due: list[tuple[float, int, float, float, tuple[Any, ...], Record]] = []
+        self._arrival = count()
         self._seq = 0
 
     def push(self, rec: Record) -> list[Record]:
@@ -165,7 +176,9 @@ class Pairer:
         self._waiting.add(id(rec))
         if rec.t is not None:
             limit = self.save_timeout_s if rec.is_save else self.timeout_s
-            self._next_expiry = min(self._next_expiry, rec.t + limit)
+            due = rec.t + limit
+            heapq.heappush(self._due, (due, next(self._arrival), rec.t, limit, key, rec))
+            self._next_expiry = min(self._next_expiry, due)
 
     def _response(self, rec: Record) -> None:
         key = self._key(rec)
@@ -189,17 +202,22 @@ class Pairer:
             req.latency_ms = rec.latency_ms = latency
 
     def _expire(self, now: float) -> None:
-        nxt = float("inf")
-        for key, requests in list(self._pending.items()):
-            for req in list(requests):
-                if req.t is None:
-                    continue
-                limit = self.save_timeout_s if req.is_save else self.timeout_s
-                if now - req.t > limit:
-                    self._drop(key, req, f"no response within {limit * 1000:.0f} ms")
-                else:
-                    nxt = min(nxt, req.t + limit)
-        self._next_expiry = nxt
+        due, waiting = self._due, self._waiting
+        later = []
+        while due and due[0][0] <= now + _DUE_SLACK_S:
+            entry = heapq.heappop(due)
+            _, _, t, limit, key, req = entry
+            if id(req) not in waiting:
+                continue  # answered or dropped since
+            if now - t > limit:
+                self._drop(key, req, f"no response within {limit * 1000:.0f} ms")
+            else:
+                later.append(entry)
+        for entry in later:
+            heapq.heappush(due, entry)
+        while due and id(due[0][5]) not in waiting:
+            heapq.heappop(due)
+        self._next_expiry = due[0][0] if due else float("inf")
 
     def _close(self, key: tuple[Any, ...], why: str) -> None:
         """No more answers will come for the requests waiting on key."""
@@ -232,8 +250,6 @@ class Pairer:
         elif self._over_limit():
             # bound memory: give up on the oldest request rather than hold the stream
             head = held[0]
-            for key, requests in list(self._pending.items()):
-                if any(req is head for req in requests):
-                    self._drop(key, head, "no response within the pairing window")
+            self._drop(self._key(head), head, "no response within the pairing window")
             out += self._release()
         return out

@@ -432,3 +432,20 @@ def test_realistic_traffic(kind: str, work: Path) -> None:
             data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
         path = write(work, f"traffic-{kind}.bin", bytes(data))
     assert assert_same(path) > 5000
+
+
+def test_thousands_of_requests_waiting_at_once(work: Path) -> None:
+    """Requests to thousands of CAN identifiers, most never answered, some answered late or
+    twice: the pairing's time-out order (a heap in Python) against the core's."""
+    rng = random.Random(12)
+    frames, t = [], 1_763_700_000.0
+    for _ in range(6000):
+        dev, reg = rng.randrange(1, 255), rng.randrange(1000, 1200)
+        frames.append(b.can_read_request(dev, reg, 8, t=t))
+        if rng.random() < 0.2:  # answered, sometimes after the time-out
+            late = t + rng.choice((0.0004, 0.3, 0.6, 2.5))
+            frames.append(b.can_read_response(dev, reg, bytes(8), t=late))
+        t += rng.choice((0.00002, 0.0001, 0.01))
+    frames.sort(key=lambda f: f.t or 0.0)
+    lines = [corpus.candump_line(f, f.t or 0.0) for f in frames]
+    assert assert_same(write(work, "pending.log", "\n".join(lines).encode() + b"\n")) > 6000
