@@ -35,10 +35,7 @@ import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any, Protocol
-
-import can
-from can.util import dlc2len
+from typing import IO, TYPE_CHECKING, Any, Protocol
 
 from decoders.model import CanFrame
 
@@ -46,6 +43,9 @@ from ..errors import UsageError
 from ..lifecycle import Closing
 from .can_lines import FORMATS, LineFeed, next_noted
 from .can_message import message_to_frame
+
+if TYPE_CHECKING:  # python-can is imported when one of its formats is read: 0.1 s at start-up
+    import can
 
 MAX_ERRORS = 100  # errors listed per file; ``bad_lines`` counts them all
 READ_BUFFER = 1 << 20
@@ -328,12 +328,12 @@ def _parse_candump(line: bytes, channels: dict[bytes, str]) -> CanFrame | None:
 
 
 # python-can reader per suffix (the readers keep python-can's own names)
-_PYTHON_CAN_READERS: dict[str, Any] = {
-    ".asc": can.ASCReader,
-    ".blf": can.BLFReader,
-    ".trc": can.TRCReader,
-    ".csv": can.CSVReader,
-    ".mf4": can.MF4Reader,
+_PYTHON_CAN_READERS: dict[str, str] = {
+    ".asc": "ASCReader",
+    ".blf": "BLFReader",
+    ".trc": "TRCReader",
+    ".csv": "CSVReader",
+    ".mf4": "MF4Reader",
 }
 _BINARY_SUFFIXES = frozenset({".blf", ".mf4"})
 BLF_HEADER_SIZE = 144  # FILE_HEADER_SIZE: what python-can's BLFWriter writes first
@@ -354,9 +354,12 @@ class PythonCanFileReader(_FileReaderBase):
     def __init__(self, path: str | os.PathLike[str]) -> None:
         super().__init__(path)
         self.suffix = _format_suffix(self.path)
-        reader_type = _PYTHON_CAN_READERS.get(self.suffix)
-        if reader_type is None:
+        reader_name = _PYTHON_CAN_READERS.get(self.suffix)
+        if reader_name is None:
             raise ValueError(_unsupported(self.path))
+        import can
+
+        reader_type = getattr(can, reader_name)
         if not self.path.exists():
             raise FileNotFoundError(f"CAN capture not found: {self.path}")
         self._reader_type = reader_type
@@ -399,7 +402,9 @@ class PythonCanFileReader(_FileReaderBase):
                 return "the file is empty: not a BLF capture"
             if "unpack requires a buffer" in str(exc):
                 return "too short for a BLF file header: not a BLF capture, or cut short"
-            if isinstance(exc, can.io.blf.BLFParseError):
+            from can.io.blf import BLFParseError
+
+            if isinstance(exc, BLFParseError):
                 return "not a BLF capture (it does not start with the BLF signature 'LOGG')"
         return _exc_text(exc)
 
@@ -544,6 +549,8 @@ def _data_match_dlc(msg: can.Message) -> bool:
         return True
     n = len(msg.data)
     if msg.is_fd or n > 8:  # CAN FD, the flag lost or not (.csv)
+        from can.util import dlc2len
+
         return n in (msg.dlc, dlc2len(min(msg.dlc, 15)))
     return n == min(msg.dlc, 8)
 

@@ -11,9 +11,12 @@ the same everywhere:
 
 from __future__ import annotations
 
-import can
+from typing import TYPE_CHECKING
 
 from decoders.model import CanFrame
+
+if TYPE_CHECKING:  # python-can is imported where a Message is made: it costs 0.1 s to import
+    import can
 
 
 def message_to_frame(msg: can.Message, t: float | None = None) -> CanFrame:
@@ -35,6 +38,8 @@ def message_to_frame(msg: can.Message, t: float | None = None) -> CanFrame:
 
 
 def frame_to_message(frame: CanFrame) -> can.Message:
+    import can
+
     """``frame`` as a python-can Message (a frame without a time gets python-can's 0.0)."""
     return can.Message(
         timestamp=0.0 if frame.t is None else frame.t,

@@ -15,7 +15,9 @@ use std::fmt::Write;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::flags as F;
-use crate::model::{CanFrame, Fields, PairKey, Record, Str, Value, EG2_CAN, FOREIGN_CAN, FRAME};
+use crate::model::{
+    CanFrame, Fields, PairKey, Record, SharedFields, Str, Text, Value, EG2_CAN, FOREIGN_CAN, FRAME,
+};
 use crate::model::{REQUEST, RESPONSE};
 use crate::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
 
@@ -36,10 +38,15 @@ pub const MAP_LAST: i64 = 1130;
 pub const PENDING_TIMEOUT_S: f64 = 2.0;
 /// Memo sizes (the Python's; reaching them only empties a cache, the output is the same).
 pub const MEMO_LIMIT: usize = 50_000;
+/// Here the memos of decodes are smaller than the Python's (each decode keeps its JSON text
+/// too): at most two generations of this many (crate::hash::FrameMemo), and this many layouts;
+/// benchmark traffic hits as often, and hostile input (every frame new) stays in a few MB.
+const MEMO_GENERATION: usize = 2048;
+const LAYOUT_LIMIT: usize = 4096;
 /// Pending table size: reaching it forgets every pending request (this one changes output,
 /// exactly as in the Python).
 pub const PENDING_LIMIT: usize = 50_000;
-const VALUE_CACHE_LIMIT: usize = 1 << 16;
+const VALUE_CACHE_LIMIT: usize = 1 << 14;
 
 /// SocketCAN error classes (linux/can/error.h), carried in an error frame's identifier.
 const CAN_ERR_CLASSES: [(u32, &str); 9] = [
@@ -61,7 +68,7 @@ const TAG_NONE: u32 = 2;
 /// a response whose length does not match the pending request: TAG_MISMATCH + expected length
 const TAG_MISMATCH: u32 = 16;
 
-use crate::hash::FastMap;
+use crate::hash::{FastMap, FrameMemo};
 
 /// (operation, start address, device) of an EG2 identifier.
 pub fn unpack_id(aid: u32) -> (u32, u32, u32) {
@@ -383,10 +390,10 @@ struct Template {
     device: Option<i64>,
     code: Option<i64>,
     name: Option<Str>,
-    fields: Fields,
+    fields: SharedFields,
     errors: Vec<String>,
     warnings: Vec<String>,
-    summary: String,
+    summary: Text,
     pair_key: Option<PairKey>,
     expects: bool,
     is_save: bool,
@@ -599,10 +606,10 @@ fn build_other(aid: u32, data: &[u8], tag: u32) -> Template {
         device: Some(device as i64),
         code: Some(op as i64),
         name,
-        fields,
+        fields: fields.into(),
         errors: notes.errors,
         warnings: notes.warnings,
-        summary,
+        summary: summary.into(),
         pair_key: direction.map(|_| [aid as i64, 0]),
         expects: direction == Some(REQUEST) && device != BROADCAST,
         is_save: false,
@@ -695,10 +702,10 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
         device: None,
         code: None,
         name: None,
-        fields,
+        fields: fields.into(),
         errors: notes.errors,
         warnings: notes.warnings,
-        summary,
+        summary: summary.into(),
         pair_key: None,
         expects: false,
         is_save: false,
@@ -710,7 +717,7 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
 /// its decode, and the layout the three fix.
 struct Last {
     data: [u8; 8],
-    template: Template,
+    template: Arc<Template>,
     layout: Layout,
 }
 
@@ -722,10 +729,22 @@ pub struct Eg2CanDecoder {
     pub bus: Arc<str>,
     devices: Option<Vec<u32>>,
     directions: Directions,
-    /// frames without register values: (aid, data, tag) packed -> decode
-    memo: FastMap<u128, Template>,
+    /// the memos of `decode` (`decode_with` takes the caller's)
+    memos: CanMemos,
+}
+
+/// The memoised decodes. A decode does not depend on the bus, so the decoders of all the buses
+/// of a capture can share one set (pipeline.rs does): memory stays bounded however many
+/// channels a log names. Caches: what they drop changes no output.
+#[derive(Default)]
+pub struct CanMemos {
+    /// frames without register values: (aid, length, tag, data) -> decode
+    memo: Option<FrameMemo<Template>>,
     /// (aid << 10 | length << 6 | tag) -> the last value-carrying frame
     last: FastMap<u64, Last>,
+    /// value-carrying frames: (that key, data) -> decode (values come back: a gripper
+    /// moving to and fro, a poll of a few registers)
+    filled: Option<FrameMemo<Arc<Template>>>,
     /// (CAN address << 16 | raw value) -> the decoded value
     values: FastMap<u64, ValueEntry>,
 }
@@ -736,9 +755,7 @@ impl Eg2CanDecoder {
             bus,
             devices: None,
             directions: Directions::default(),
-            memo: FastMap::default(),
-            last: FastMap::default(),
-            values: FastMap::default(),
+            memos: CanMemos::default(),
         }
     }
 
@@ -767,6 +784,21 @@ impl Eg2CanDecoder {
 
     /// The Record of one frame. Never panics on any frame.
     pub fn decode(&mut self, frame: &CanFrame, index: u64) -> Record {
+        let mut memos = std::mem::take(&mut self.memos);
+        let rec = self.decode_with(&mut memos, frame, index);
+        self.memos = memos;
+        rec
+    }
+
+    /// `decode` with memos shared with other decoders.
+    pub fn decode_with(&mut self, memos: &mut CanMemos, frame: &CanFrame, index: u64) -> Record {
+        let memo = memos
+            .memo
+            .get_or_insert_with(|| FrameMemo::new(MEMO_GENERATION));
+        let filled = memos
+            .filled
+            .get_or_insert_with(|| FrameMemo::new(MEMO_GENERATION));
+        let (last_of, values) = (&mut memos.last, &mut memos.values);
         let data = &frame.data[..];
         let aid = frame.arbitration_id;
         let n = data.len();
@@ -798,22 +830,31 @@ impl Eg2CanDecoder {
             let lkey = (aid as u64) << 10 | (n as u64) << 6 | tag as u64;
             let mut buf = [0u8; 8];
             buf[..n].copy_from_slice(data);
-            if let Some(last) = self.last.get_mut(&lkey) {
-                if last.data == buf {
-                    return record_from(&last.template, &self.bus, frame.t, n, data, index);
+            // the memo key: that key, then the data
+            let mut fkey = [0u8; 16];
+            fkey[..8].copy_from_slice(&lkey.to_le_bytes());
+            fkey[8..8 + n].copy_from_slice(data);
+            let fkey = &fkey[..8 + n];
+            if let Some(last) = last_of.get_mut(&lkey) {
+                if last.data != buf {
+                    // same identifier, length and direction, new values: the layout holds
+                    let layout = &last.layout;
+                    last.template = filled
+                        .get_or_insert_with(fkey, || Arc::new(fill(values, layout, data)))
+                        .clone();
+                    last.data = buf;
                 }
-                // same identifier, length and direction, new values: the layout holds
-                last.template = fill(&mut self.values, &last.layout, data);
-                last.data = buf;
                 return record_from(&last.template, &self.bus, frame.t, n, data, index);
             }
-            if self.last.len() >= MEMO_LIMIT {
-                self.last.clear();
+            if last_of.len() >= LAYOUT_LIMIT {
+                last_of.clear(); // a cache: emptying it changes no output
             }
             let layout = make_layout(aid, n, tag);
-            let template = fill(&mut self.values, &layout, data);
+            let template = filled
+                .get_or_insert_with(fkey, || Arc::new(fill(values, &layout, data)))
+                .clone();
             let rec = record_from(&template, &self.bus, frame.t, n, data, index);
-            self.last.insert(
+            last_of.insert(
                 lkey,
                 Last {
                     data: buf,
@@ -823,19 +864,13 @@ impl Eg2CanDecoder {
             );
             rec
         } else {
-            let mut buf = [0u8; 8];
-            buf[..n].copy_from_slice(data);
-            let key = (aid as u128) << 72
-                | (n as u128) << 68
-                | (tag as u128) << 64
-                | u64::from_le_bytes(buf) as u128;
-            if self.memo.len() >= MEMO_LIMIT {
-                self.memo.clear(); // a cache: emptying it changes no output
-            }
-            let tpl = self
-                .memo
-                .entry(key)
-                .or_insert_with(|| build_other(aid, data, tag));
+            // the memo key: identifier, length, tag, data
+            let mut key = [0u8; 16];
+            key[..4].copy_from_slice(&aid.to_le_bytes());
+            key[4] = n as u8;
+            key[5] = tag as u8; // at most TAG_MISMATCH
+            key[6..6 + n].copy_from_slice(data);
+            let tpl = memo.get_or_insert_with(&key[..6 + n], || build_other(aid, data, tag));
             record_from(tpl, &self.bus, frame.t, n, data, index)
         }
     }
@@ -934,10 +969,10 @@ fn fill(values_cache: &mut FastMap<u64, ValueEntry>, layout: &Layout, data: &[u8
         device: Some(layout.device),
         code: Some(layout.code),
         name: layout.name.clone(),
-        fields,
+        fields: fields.into(),
         errors: Vec::new(),
         warnings: notes.warnings,
-        summary,
+        summary: summary.into(),
         pair_key: Some(layout.pair_key),
         expects: layout.expects,
         is_save,
@@ -1015,13 +1050,13 @@ mod tests {
         let req = dec.decode(&frame(Some(1.0), aid, &[4]), 0);
         assert_eq!(req.direction, Some(REQUEST));
         assert_eq!(
-            req.summary,
+            &*req.summary,
             "read 4 bytes at 1120 (measured_force..measured_opening)"
         );
         let resp = dec.decode(&frame(Some(1.01), aid, &[0xF4, 0x01, 0xFF, 0xFF]), 1);
         assert_eq!(resp.direction, Some(RESPONSE));
         assert_eq!(
-            resp.summary,
+            &*resp.summary,
             "-> measured_force=500, measured_opening=65535 (4587.45 mm)"
         );
         assert_eq!(dec.pending(), 0);
@@ -1032,7 +1067,7 @@ mod tests {
         let mut dec = Eg2CanDecoder::new("can0".into());
         let rec = dec.decode(&frame(None, id(1, 1021, 1), &[1, 2, 3]), 0);
         assert_eq!(
-            rec.summary,
+            &*rec.summary,
             "write 3 bytes at 1021: byte 1021=0x01, speed=770"
         );
         assert_eq!(rec.flags, vec![F::ODD_SPAN]);
@@ -1078,7 +1113,7 @@ mod tests {
         remote.dlc = Some(5);
         let r = dec.decode(&remote, 1);
         assert_eq!((r.protocol, r.length), (FOREIGN_CAN, 5));
-        assert_eq!(r.summary, "remote standard 0x123 [5]");
+        assert_eq!(&*r.summary, "remote standard 0x123 [5]");
         assert_eq!(r.warnings, vec!["remote frame".to_string()]);
     }
 }

@@ -462,7 +462,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
             "garbage: {n} bytes belong to no frame ({})",
             self.garbage_why
         ));
-        rec.summary = format!("{n} garbage bytes");
+        rec.summary = format!("{n} garbage bytes").into();
         rec.flags.push(flags::GARBAGE);
         s.stamp(&mut rec);
         rec
@@ -493,7 +493,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
         let mut rec = Record::new(None, s.bus.clone(), P::PROTOCOL, TRUNCATED, raw);
         rec.offset = Some(s.base + pos as u64);
         rec.errors.push(reason);
-        rec.summary = format!("truncated frame ({n} bytes)");
+        rec.summary = format!("truncated frame ({n} bytes)").into();
         rec.flags.push(flags::TRUNCATED);
         s.stamp(&mut rec);
         rec

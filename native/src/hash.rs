@@ -69,10 +69,71 @@ impl Hasher for FastHasher {
 pub type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FastHasher>>;
 pub type FastSet<K> = HashSet<K, BuildHasherDefault<FastHasher>>;
 
+/// A memo of decodes by frame bytes, bounded in memory and nearly as good as an LRU of twice
+/// its generation: entries go into the current generation; when it is full it becomes the
+/// old one (the previous old one is dropped), and an entry found in the old generation moves
+/// back into the current one. The tables grow as entries come (a decoder that sees few frames,
+/// one per CAN bus, stays small). A cache: what it drops changes no output.
+pub struct FrameMemo<V> {
+    current: FastMap<Box<[u8]>, V>,
+    old: FastMap<Box<[u8]>, V>,
+    generation: usize,
+}
+
+impl<V> FrameMemo<V> {
+    pub fn new(generation: usize) -> Self {
+        FrameMemo {
+            current: FastMap::default(),
+            old: FastMap::default(),
+            generation,
+        }
+    }
+
+    /// The value of `key`, made by `make` if it is not held.
+    #[inline]
+    pub fn get_or_insert_with(&mut self, key: &[u8], make: impl FnOnce() -> V) -> &V {
+        if let Some(v) = self.current.get(key) {
+            // SAFETY: `v` borrows `self.current`, which is not touched again before the
+            // borrow ends; returning it directly is refused only by a limitation of today's
+            // borrow checker (a conditional return of a borrow, NLL problem case 3)
+            return unsafe { &*(v as *const V) };
+        }
+        let value = match self.old.remove_entry(key) {
+            Some((_, v)) => v,
+            None => make(),
+        };
+        if self.current.len() >= self.generation {
+            std::mem::swap(&mut self.current, &mut self.old);
+            self.current.clear(); // keeps its table: no allocation
+        }
+        self.current.entry(key.into()).or_insert(value)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::hash::BuildHasher;
+
+    #[test]
+    fn frame_memo_keeps_two_generations() {
+        let mut memo = FrameMemo::new(2);
+        let made = std::cell::Cell::new(0);
+        let mut get = |k: u8| {
+            *memo.get_or_insert_with(&[k], || {
+                made.set(made.get() + 1);
+                k
+            })
+        };
+        for k in [1, 2, 1, 3, 1, 4, 5, 1, 5] {
+            assert_eq!(get(k), k);
+        }
+        // 1 stayed (moved back each time it was found in the old generation), and 5 was
+        // still in the old one: only the first sight of each key made a value
+        assert_eq!(made.get(), 5);
+        assert_eq!(get(3), 3); // 3 went with its generation
+        assert_eq!(made.get(), 6);
+    }
 
     #[test]
     fn keys_that_differ_in_their_last_bytes_spread_over_the_low_bits() {

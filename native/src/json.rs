@@ -122,35 +122,42 @@ pub fn push_ascii(out: &mut String, bytes: &[u8]) {
     unsafe { out.as_mut_vec() }.extend_from_slice(bytes);
 }
 
-/// The decimal digits of `v` (as `{}` writes a u64).
+/// The decimal digits of `v` (as `{}` writes a u64): the length first (`ilog10`), two digits
+/// per table lookup into a stack buffer, and the whole buffer copied at once (a fixed-size
+/// copy is a few moves; a copy of the digits alone would be a `memcpy` call).
+#[inline]
 pub fn push_u64(out: &mut String, v: u64) {
+    // SAFETY: only ASCII digits are written, so `out` stays UTF-8
+    let bytes = unsafe { out.as_mut_vec() };
     if v < 10 {
-        out.push(char::from(b'0' + v as u8)); // most fields: a flag, a small id, 0
+        bytes.push(b'0' + v as u8); // most fields: a flag, a small id, 0
         return;
     }
+    let n = v.ilog10() as usize + 1; // 2..=20
     let mut buf = [0u8; 20];
-    let mut pos = buf.len();
     let mut v = v;
+    let mut i = n;
     while v >= 100 {
         let d = (v % 100) as usize * 2;
         v /= 100;
-        pos -= 2;
-        buf[pos..pos + 2].copy_from_slice(&DIGITS2[d..d + 2]);
+        i -= 2;
+        buf[i] = DIGITS2[d];
+        buf[i + 1] = DIGITS2[d + 1];
     }
     if v >= 10 {
         let d = v as usize * 2;
-        pos -= 2;
-        buf[pos..pos + 2].copy_from_slice(&DIGITS2[d..d + 2]);
+        buf[0] = DIGITS2[d];
+        buf[1] = DIGITS2[d + 1];
     } else {
-        pos -= 1;
-        buf[pos] = b'0' + v as u8;
+        buf[0] = b'0' + v as u8;
     }
-    out.reserve(buf.len() - pos);
-    // SAFETY: decimal digits are ASCII, so `out` stays UTF-8; byte pushes within the reserved
-    // capacity instead of a memcpy call for a few bytes
-    let bytes = unsafe { out.as_mut_vec() };
-    for &c in &buf[pos..] {
-        bytes.push(c);
+    bytes.reserve(buf.len());
+    let len = bytes.len();
+    // SAFETY: 20 bytes of spare capacity were reserved; the first n are the digits, and only
+    // they are counted in the length
+    unsafe {
+        std::ptr::copy_nonoverlapping(buf.as_ptr(), bytes.as_mut_ptr().add(len), buf.len());
+        bytes.set_len(len + n);
     }
 }
 
@@ -267,5 +274,15 @@ mod tests {
         s.clear();
         push_u64(&mut s, u64::MAX);
         assert_eq!(s, u64::MAX.to_string());
+        // every length, at its edges, appended after other text
+        for k in 0..20u32 {
+            let p = 10u64.pow(k);
+            for v in [p - 1, p, p + 1, p.saturating_mul(7) / 3] {
+                s.clear();
+                s.push('x');
+                push_u64(&mut s, v);
+                assert_eq!(s, format!("x{v}"));
+            }
+        }
     }
 }

@@ -19,10 +19,83 @@ use std::sync::Arc;
 
 use crate::flags::SHORT_REGISTER_NUMBERS;
 use crate::framing::{ByteStreamDecoder, Framing, Stream};
-use crate::model::{Record, FRAME, MODBUS_RTU, RESPONSE};
+use crate::hash::FrameMemo;
+use crate::model::{
+    PairKey, Record, SharedFields, Str, Text, FRAME, MODBUS_RTU, REQUEST, RESPONSE,
+};
 use modbus_framing::{ModbusFramer, Pending, CRC_OK, CRC_SWAPPED_ORDER};
 use modbus_pdu::decode;
 use modbus_registers::Memo;
+
+/// Memoised frame decodes per generation (crate::hash::FrameMemo: memory stays flat).
+const FRAME_MEMO_GENERATION: usize = 4096;
+
+/// `modbus_pdu::decode`'s result with the parts every record of it shares (fields, summary)
+/// behind reference counts.
+struct Decoded {
+    direction: Option<&'static str>,
+    name: Option<Str>,
+    fields: SharedFields,
+    summary: Text,
+    errors: Vec<String>,
+    warnings: Vec<String>,
+    pair_key: Option<PairKey>,
+    expects_response: bool,
+    is_save: bool,
+    next: Option<Pending>,
+    flags: Vec<&'static str>,
+}
+
+impl From<modbus_pdu::Entry> for Decoded {
+    fn from(e: modbus_pdu::Entry) -> Self {
+        Decoded {
+            direction: e.direction,
+            name: e.name,
+            fields: e.fields.into(),
+            summary: e.summary.into(),
+            errors: e.errors,
+            warnings: e.warnings,
+            pair_key: e.pair_key,
+            expects_response: e.expects_response,
+            is_save: e.is_save,
+            next: e.next,
+            flags: e.flags,
+        }
+    }
+}
+
+/// The memo key of a decode: everything `modbus_pdu::decode` reads besides its own caches (the
+/// CRC state, the direction hint, the pending request) and the frame's bytes. None for a hint
+/// the key has no code for (then the frame is decoded afresh).
+fn memo_key(
+    key: &mut Vec<u8>,
+    raw: &[u8],
+    pending: Option<Pending>,
+    hint: Option<&'static str>,
+    crc: Option<u8>,
+) -> bool {
+    key.clear();
+    key.push(crc.map_or(0xFF, |c| {
+        debug_assert!(c != 0xFF);
+        c
+    }));
+    key.push(match hint {
+        None => 0,
+        Some(REQUEST) => 1,
+        Some(RESPONSE) => 2,
+        Some(_) => return false,
+    });
+    match pending {
+        None => key.push(0),
+        Some(p) => {
+            key.extend_from_slice(&[1, p.slave, p.fc, p.crc_ok as u8]);
+            key.extend_from_slice(&p.a.to_le_bytes());
+            key.extend_from_slice(&p.b.to_le_bytes());
+        }
+    }
+    key.extend_from_slice(raw);
+    true
+}
 
 /// How the numbering warning starts (modbus_registers' short-number note).
 const SHORT: &str = "short register number";
@@ -37,6 +110,9 @@ pub struct ModbusRtu {
     /// devices already said to use short numbers
     short_seen: [bool; 256],
     memo: Memo,
+    /// whole-frame decodes by `memo_key` (a polling loop repeats the same frames)
+    frames: FrameMemo<Decoded>,
+    key: Vec<u8>,
 }
 
 /// Modbus RTU frames of one RS485 line, in stream order.
@@ -67,6 +143,8 @@ impl Default for ModbusRtu {
             answered: false,
             short_seen: [false; 256],
             memo: Memo::default(),
+            frames: FrameMemo::new(FRAME_MEMO_GENERATION),
+            key: Vec::with_capacity(300),
         }
     }
 }
@@ -137,18 +215,19 @@ impl Framing for ModbusRtu {
                 CRC_OK
             }
         });
-        let mut e = decode(
-            &mut self.memo,
-            raw,
-            self.framer.pending,
-            s.direction_hint,
-            crc,
-        );
-        self.follow(e.direction, e.next);
-        if e.flags.contains(&SHORT_REGISTER_NUMBERS) {
-            self.short_numbering_once(raw[0], &mut e.warnings, &mut e.flags);
-        }
-        Record {
+        let (pending, hint) = (self.framer.pending, s.direction_hint);
+        let mut key = std::mem::take(&mut self.key);
+        let fresh: Decoded;
+        let e = if memo_key(&mut key, raw, pending, hint, crc) {
+            let memo = &mut self.memo;
+            self.frames
+                .get_or_insert_with(&key, || decode(memo, raw, pending, hint, crc).into())
+        } else {
+            fresh = decode(&mut self.memo, raw, pending, hint, crc).into();
+            &fresh
+        };
+        let (direction, next) = (e.direction, e.next);
+        let mut rec = Record {
             t,
             bus: s.bus.clone(),
             protocol: MODBUS_RTU,
@@ -157,22 +236,28 @@ impl Framing for ModbusRtu {
             raw: raw.to_vec(),
             offset: Some(offset),
             index: None,
-            direction: e.direction,
+            direction,
             device: Some(raw[0] as i64),
             code: Some(raw[1] as i64),
-            name: e.name,
-            fields: e.fields,
-            errors: e.errors,
-            warnings: e.warnings,
-            summary: e.summary,
+            name: e.name.clone(),
+            fields: e.fields.clone(),
+            errors: e.errors.clone(),
+            warnings: e.warnings.clone(),
+            summary: e.summary.clone(),
             seq: -1,
             pair: None,
             latency_ms: None,
             pair_key: e.pair_key,
             expects_response: e.expects_response,
             is_save: e.is_save,
-            flags: e.flags,
+            flags: e.flags.clone(),
+        };
+        self.key = key;
+        self.follow(direction, next);
+        if rec.flags.contains(&SHORT_REGISTER_NUMBERS) {
+            self.short_numbering_once(raw[0], &mut rec.warnings, &mut rec.flags);
         }
+        rec
     }
 
     fn truncated_reason(&self, raw: &[u8]) -> String {
@@ -236,7 +321,7 @@ mod tests {
             .fields
             .contains(&("numbering".into(), Value::from("short"))));
         assert_eq!(
-            recs[1].summary,
+            &*recs[1].summary,
             "-> measured_opening=500 (35.0 mm), current=-2, temperature_c=37 °C, \
              fault=0 (no fault), state=1 (fully open, idle)"
         );
@@ -253,7 +338,7 @@ mod tests {
         let names: Vec<_> = recs.iter().map(|r| r.name.as_deref()).collect();
         assert_eq!(names, vec![Some("CMD_OPENLEN_ACT..CMD_CURRENT"); 4]);
         assert_eq!(
-            recs[3].summary,
+            &*recs[3].summary,
             "-> measured_opening=11 (0.77 mm), current=21"
         );
         assert!(recs.iter().all(|r| r.warnings.is_empty()));

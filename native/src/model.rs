@@ -4,7 +4,8 @@
 //! the Python `Record.to_dict()`; `fields` keeps insertion order (as a Python dict does).
 
 use std::borrow::Cow;
-use std::sync::Arc;
+use std::ops::Deref;
+use std::sync::{Arc, OnceLock};
 
 /// A string that is usually a literal from the register/command tables.
 pub type Str = Cow<'static, str>;
@@ -63,6 +64,136 @@ impl From<bool> for Value {
 /// Ordered `fields` of a record (a Python dict keeps insertion order).
 pub type Fields = Vec<(Str, Value)>;
 
+/// A record's `fields`, shared (read-only) by every record decoded from the same frame: the
+/// decoders memoise a frame's decode, so a record takes a reference count instead of a copy of
+/// the map, and the JSONL writer formats the map (with the identity before it and the raw
+/// bytes after it) once per shared decode instead of once per record ([`SharedFields::segment`]).
+#[derive(Clone, Debug, Default)]
+pub struct SharedFields(Arc<FieldsBody>);
+
+#[derive(Debug, Default)]
+struct FieldsBody {
+    items: Fields,
+    segment: OnceLock<Segment>,
+}
+
+/// The JSON text of the keys `direction` .. `raw` of the first record written with these
+/// fields, and what it was made of: the writer reuses it for a record with the same values.
+#[derive(Debug)]
+pub struct Segment {
+    pub direction: Option<&'static str>,
+    pub device: Option<i64>,
+    pub code: Option<i64>,
+    pub name: Option<Str>,
+    pub raw: Box<[u8]>,
+    pub text: Box<str>,
+    /// the JSON text of `,"errors":[],"warnings":[],"flags":[],"summary":…` for a record with
+    /// no notes and this summary (the shared `Arc`), when the first record had none
+    pub quiet: Option<(Text, Box<str>)>,
+}
+
+impl Segment {
+    /// True when `rec` has the values this text was made of.
+    #[inline]
+    pub fn matches(&self, rec: &Record) -> bool {
+        self.device == rec.device
+            && self.code == rec.code
+            && *self.raw == *rec.raw
+            && match (self.direction, rec.direction) {
+                (Some(a), Some(b)) => std::ptr::eq(a, b) || a == b,
+                (a, b) => a == b,
+            }
+            && self.name.as_deref() == rec.name.as_deref()
+    }
+
+    /// The text of `quiet` if `rec` has no errors, warnings or flags and the same summary.
+    #[inline]
+    pub fn quiet_text(&self, rec: &Record) -> Option<&str> {
+        let (summary, text) = self.quiet.as_ref()?;
+        let quiet = rec.errors.is_empty() && rec.warnings.is_empty() && rec.flags.is_empty();
+        (quiet && Arc::ptr_eq(summary, &rec.summary)).then_some(&**text)
+    }
+}
+
+impl SharedFields {
+    /// The empty map (no allocation: one shared instance).
+    pub fn empty() -> Self {
+        static EMPTY: OnceLock<SharedFields> = OnceLock::new();
+        EMPTY
+            .get_or_init(|| SharedFields(Arc::new(FieldsBody::default())))
+            .clone()
+    }
+
+    /// The JSON segment made for these fields, if one was.
+    #[inline]
+    pub fn segment(&self) -> Option<&Segment> {
+        self.0.segment.get()
+    }
+
+    /// True when another record or a decoder's memo holds these fields too (a segment made for
+    /// them may be used again).
+    #[inline]
+    pub fn is_shared(&self) -> bool {
+        Arc::strong_count(&self.0) > 1
+    }
+
+    /// Keep `make()`'s segment for the records that share these fields (the first one wins).
+    pub fn set_segment(&self, make: impl FnOnce() -> Segment) {
+        if self.0.segment.get().is_none() {
+            let _ = self.0.segment.set(make());
+        }
+    }
+
+    /// The fields to change (copied first if shared; the copy has no segment).
+    pub fn make_mut(&mut self) -> &mut Fields {
+        if Arc::get_mut(&mut self.0).is_none() {
+            self.0 = Arc::new(FieldsBody {
+                items: self.0.items.clone(),
+                segment: OnceLock::new(),
+            });
+        }
+        let body = Arc::get_mut(&mut self.0).expect("unique after the copy");
+        body.segment = OnceLock::new(); // the text no longer describes them
+        &mut body.items
+    }
+}
+
+impl Deref for SharedFields {
+    type Target = Fields;
+    #[inline]
+    fn deref(&self) -> &Fields {
+        &self.0.items
+    }
+}
+
+impl From<Fields> for SharedFields {
+    fn from(mut items: Fields) -> Self {
+        if items.is_empty() {
+            return SharedFields::empty();
+        }
+        items.shrink_to_fit(); // a memo holds thousands: no spare room in each
+        SharedFields(Arc::new(FieldsBody {
+            items,
+            segment: OnceLock::new(),
+        }))
+    }
+}
+
+impl FromIterator<(Str, Value)> for SharedFields {
+    fn from_iter<I: IntoIterator<Item = (Str, Value)>>(iter: I) -> Self {
+        Fields::from_iter(iter).into()
+    }
+}
+
+impl PartialEq for SharedFields {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.items == other.0.items
+    }
+}
+
+/// A record's summary: shared by the records of one memoised decode, like its fields.
+pub type Text = Arc<str>;
+
 /// One CAN frame (decoders/model.py `CanFrame`).
 #[derive(Clone, Debug, Default)]
 pub struct CanFrame {
@@ -104,10 +235,10 @@ pub struct Record {
     pub device: Option<i64>,
     pub code: Option<i64>,
     pub name: Option<Str>,
-    pub fields: Fields,
+    pub fields: SharedFields,
     pub errors: Vec<String>,
     pub warnings: Vec<String>,
-    pub summary: String,
+    pub summary: Text,
     pub seq: i64,
     pub pair: Option<i64>,
     pub latency_ms: Option<f64>,
@@ -117,6 +248,12 @@ pub struct Record {
     pub is_save: bool,
     /// one code per error/warning text (decoders/flags.py)
     pub flags: Vec<&'static str>,
+}
+
+/// The empty summary (no allocation: one shared instance).
+pub fn empty_text() -> Text {
+    static EMPTY: OnceLock<Text> = OnceLock::new();
+    EMPTY.get_or_init(|| Arc::from("")).clone()
 }
 
 impl Record {
@@ -141,10 +278,10 @@ impl Record {
             device: None,
             code: None,
             name: None,
-            fields: Vec::new(),
+            fields: SharedFields::empty(),
             errors: Vec::new(),
             warnings: Vec::new(),
-            summary: String::new(),
+            summary: empty_text(),
             seq: -1,
             pair: None,
             latency_ms: None,

@@ -6,7 +6,7 @@
 //! their answer): memory stays flat at any input size. The output is pulled in batches of
 //! bytes (`next_batch`), which the Python binding hands on without looking inside.
 
-use crate::can::Eg2CanDecoder;
+use crate::can::{CanMemos, Eg2CanDecoder};
 use crate::candump::{BusNamer, CandumpReader};
 use crate::detect::detect_protocol;
 use crate::framing::StreamDecoder;
@@ -24,11 +24,12 @@ use std::sync::Arc;
 /// Bytes of a stream looked at before choosing its protocol (analyzer/pipeline.py).
 pub const DETECT_BYTES: usize = 4096;
 
-/// CAN frames decoded per step of `next_batch` (a chunk of a raw dump is one step).
-const CAN_STEP: usize = 1024;
+/// CAN frames decoded per step of `next_batch` (about 140 KB of JSONL).
+const CAN_STEP: usize = 256;
 
-/// Bytes of a raw dump's chunk handed to the decoder at a time.
-const FEED_SLICE: usize = 4096;
+/// Bytes of a raw dump's chunk handed to the decoder per step (about 100 KB of JSONL): a
+/// batch ends at most this much output after its size.
+const FEED_SLICE: usize = 2048;
 
 /// The decode command's options the native path supports.
 #[derive(Clone, Debug)]
@@ -134,7 +135,7 @@ pub fn reader_for(path: &Path) -> io::Result<ReaderKind> {
 /// What decodes: one byte stream (raw dumps), or CAN frames per bus.
 enum Decoders {
     Bytes(ByteStream),
-    Can(CanBuses),
+    Can(Box<CanBuses>),
 }
 
 /// The stream decoder of the protocol chosen.
@@ -190,22 +191,27 @@ impl ByteStream {
         }
     }
 
-    /// `Decoding.feed` for one chunk of bytes.
-    fn feed(&mut self, data: &[u8], out: &mut Vec<Record>) {
-        if let Some(dec) = self.dec.as_mut() {
-            dec.get().feed(data, None, out);
-            return;
-        }
-        // `_start_stream`: hold the chunk; decide once the sample is big enough
+    /// `Decoding.feed` for one chunk of bytes, before the protocol is chosen: the chunk is
+    /// held. Once the protocol is chosen, the bytes held (this chunk included) are handed
+    /// back, to be fed as any other bytes (the decoders give the same records in any
+    /// chunking, so slices of them give what the Python's replay of whole chunks gives).
+    fn detect(&mut self, data: &[u8]) -> Option<Vec<u8>> {
         self.undetected.push(data.to_vec());
         self.undetected_len += data.len();
         let protocol = match self.protocol {
             Some(p) => p,
-            None if self.undetected_len < DETECT_BYTES => return,
+            None if self.undetected_len < DETECT_BYTES => return None,
             None => self.choose(),
         };
         self.new_decoder(protocol);
-        self.replay(out);
+        self.undetected_len = 0;
+        Some(std::mem::take(&mut self.undetected).concat())
+    }
+
+    /// Feed bytes to the chosen decoder.
+    fn feed(&mut self, data: &[u8], out: &mut Vec<Record>) {
+        let dec = self.dec.as_mut().expect("a decoder was chosen").get();
+        dec.feed(data, None, out);
     }
 
     /// `Decoding.finish` for the stream: choose if still undecided, then decide held bytes.
@@ -227,6 +233,8 @@ struct CanBuses {
     names: BusNamer,
     /// by bus name: channels with one name ("0" and "can0") share a decoder, as in Python
     decoders: Vec<(Arc<str>, Eg2CanDecoder)>,
+    /// one set of memos for all of them (memory bounded however many channels)
+    memos: CanMemos,
     last: usize,
     index: u64,
 }
@@ -236,6 +244,7 @@ impl CanBuses {
         CanBuses {
             names: BusNamer::new(fixed),
             decoders: Vec::new(),
+            memos: CanMemos::default(),
             last: 0,
             index: 0,
         }
@@ -258,7 +267,9 @@ impl CanBuses {
         }
         let index = self.index;
         self.index += 1;
-        self.decoders[self.last].1.decode(frame, index)
+        self.decoders[self.last]
+            .1
+            .decode_with(&mut self.memos, frame, index)
     }
 }
 
@@ -273,11 +284,8 @@ enum Input {
 struct Stages {
     linter: TimingLinter,
     pairer: Pairer,
-    device: Option<i64>,
-    errors_only: bool,
-    writer: Box<dyn RecordWriter + Send>,
-    written: u64,
-    /// records the pairer released (reused)
+    sink: Sink,
+    /// records the pairer released at the end (reused)
     ready: Vec<Record>,
 }
 
@@ -288,10 +296,11 @@ impl Stages {
         self.linter.check(&mut rec);
         if self.pairer.admit(&mut rec) {
             // the common case: nothing held, nothing waiting: straight out, no copy
-            self.write(&rec, out);
+            self.sink.write(&rec, out);
         } else {
-            self.pairer.hold(rec, &mut self.ready);
-            self.write_ready(out);
+            // what pairing releases is written where it lies
+            let (pairer, sink) = (&mut self.pairer, &mut self.sink);
+            pairer.hold_with(rec, &mut |r| sink.write(r, out));
         }
     }
 
@@ -302,14 +311,22 @@ impl Stages {
     }
 
     fn write_ready(&mut self, out: &mut Vec<u8>) {
-        let mut ready = std::mem::take(&mut self.ready);
-        for rec in ready.drain(..) {
-            self.write(&rec, out);
+        for rec in &self.ready {
+            self.sink.write(rec, out);
         }
-        self.ready = ready;
+        self.ready.clear();
     }
+}
 
-    /// The `--device` / `--errors-only` filter (`CaptureOptions.record_filter`), then out.
+/// The `--device` / `--errors-only` filter (`CaptureOptions.record_filter`) and the writer.
+struct Sink {
+    device: Option<i64>,
+    errors_only: bool,
+    writer: Box<dyn RecordWriter + Send>,
+    written: u64,
+}
+
+impl Sink {
     #[inline]
     fn write(&mut self, rec: &Record, out: &mut Vec<u8>) {
         if let Some(d) = self.device {
@@ -338,6 +355,9 @@ pub struct DecodeRun {
     // reused between steps
     decoded: Vec<Record>,
     frame: CanFrame,
+    /// the raw dump's chunk being decoded, and where its next slice starts
+    chunk: Vec<u8>,
+    chunk_at: usize,
 }
 
 impl DecodeRun {
@@ -373,7 +393,7 @@ impl DecodeRun {
                 let reader = CandumpReader::open(path)?;
                 (
                     Input::Can(reader),
-                    Decoders::Can(CanBuses::new(opts.bus.as_deref())),
+                    Decoders::Can(Box::new(CanBuses::new(opts.bus.as_deref()))),
                 )
             }
             ReaderKind::Raw | ReaderKind::GzipRaw => {
@@ -392,10 +412,12 @@ impl DecodeRun {
             linter: TimingLinter::new(),
             // both readers are single-stream: seq is the place in the input
             pairer: Pairer::new(true),
-            device: opts.device,
-            errors_only: opts.errors_only,
-            writer,
-            written: 0,
+            sink: Sink {
+                device: opts.device,
+                errors_only: opts.errors_only,
+                writer,
+                written: 0,
+            },
             ready: Vec::new(),
         };
         Ok(DecodeRun {
@@ -409,6 +431,8 @@ impl DecodeRun {
             failure: None,
             decoded: Vec::new(),
             frame: CanFrame::default(),
+            chunk: Vec::new(),
+            chunk_at: 0,
         })
     }
 
@@ -420,7 +444,7 @@ impl DecodeRun {
         }
         if !self.started {
             self.started = true;
-            self.stages.writer.begin(out);
+            self.stages.sink.writer.begin(out);
         }
         let start = out.len();
         while out.len() - start < max_bytes.max(1) {
@@ -441,10 +465,10 @@ impl DecodeRun {
         }
         if !self.started {
             self.started = true;
-            self.stages.writer.begin(out);
+            self.stages.sink.writer.begin(out);
         }
-        let start = self.stages.written;
-        while self.stages.written - start < max_records.max(1) {
+        let start = self.stages.sink.written;
+        while self.stages.sink.written - start < max_records.max(1) {
             if !self.step(out) {
                 self.end(out);
                 return false;
@@ -477,7 +501,7 @@ impl DecodeRun {
 
     /// Records written so far (after the filter).
     pub fn records_written(&self) -> u64 {
-        self.stages.written
+        self.stages.sink.written
     }
 
     /// A read error that ended the input early (the Python would have raised it: the command
@@ -488,33 +512,45 @@ impl DecodeRun {
 
     // -- internals -------------------------------------------------------------------------
 
-    /// Decode one step of input (one chunk, or up to `CAN_STEP` frames) and write what is
-    /// ready. False at the end of the input.
+    /// Decode one step of input (a slice of a chunk, or up to `CAN_STEP` frames) and write
+    /// what is ready. False at the end of the input.
     fn step(&mut self, out: &mut Vec<u8>) -> bool {
         let decoded = &mut self.decoded;
         let stages = &mut self.stages;
         match (&mut self.input, &mut self.decoders) {
-            (Input::Bytes(reader), Decoders::Bytes(stream)) => match reader.next_chunk() {
-                Ok(Some(chunk)) => {
-                    if stream.dec.is_none() {
-                        stream.feed(chunk, decoded);
-                        stages.post_all(decoded, out);
-                        return true;
+            (Input::Bytes(reader), Decoders::Bytes(stream)) => {
+                if self.chunk_at >= self.chunk.len() {
+                    match reader.next_chunk() {
+                        Ok(Some(chunk)) if stream.dec.is_none() => {
+                            // held until the protocol is chosen, then decoded as read
+                            if let Some(held) = stream.detect(chunk) {
+                                self.chunk = held;
+                                self.chunk_at = 0;
+                            }
+                            return true;
+                        }
+                        Ok(Some(chunk)) => {
+                            self.chunk.clear();
+                            self.chunk.extend_from_slice(chunk);
+                            self.chunk_at = 0;
+                        }
+                        Ok(None) => return false,
+                        Err(e) => {
+                            self.failure = Some(e);
+                            return false;
+                        }
                     }
-                    // in slices: the records of one slice are written while still in cache
-                    // (the decoders give the same records in any chunking: their tests say so)
-                    for slice in chunk.chunks(FEED_SLICE) {
-                        stream.feed(slice, decoded);
-                        stages.post_all(decoded, out);
-                    }
-                    true
                 }
-                Ok(None) => false,
-                Err(e) => {
-                    self.failure = Some(e);
-                    false
-                }
-            },
+                // one slice per step: its records are written while still in cache, and a
+                // batch ends within a slice's output of its size (a chunk's records would
+                // make megabytes of JSON). The decoders give the same records in any
+                // chunking (their tests say so).
+                let end = self.chunk.len().min(self.chunk_at + FEED_SLICE);
+                stream.feed(&self.chunk[self.chunk_at..end], decoded);
+                self.chunk_at = end;
+                stages.post_all(decoded, out);
+                true
+            }
             (Input::Can(reader), Decoders::Can(buses)) => {
                 for _ in 0..CAN_STEP {
                     if !reader.next_into(&mut self.frame) {
@@ -537,7 +573,7 @@ impl DecodeRun {
         self.stages.post_all(&mut self.decoded, out);
         self.stages.pairer.flush(&mut self.stages.ready);
         self.stages.write_ready(out);
-        self.stages.writer.end(out);
+        self.stages.sink.writer.end(out);
         match &self.input {
             Input::Bytes(r) => self.errors.extend(r.errors().iter().cloned()),
             Input::Can(r) => self.errors.extend(r.errors.iter().cloned()),

@@ -32,8 +32,15 @@ create_exception!(
 );
 
 /// The default size of one output batch: large enough that Python's per-batch cost (one
-/// `bytes` object, one write) vanishes, small enough to keep memory flat.
-const BATCH_BYTES: usize = 1 << 20;
+/// `bytes` object, one write) vanishes, small enough to keep memory flat (a few batches are
+/// in flight to the writer thread).
+const BATCH_BYTES: usize = 256 << 10;
+
+/// Room for one batch: `next_batch` stops after the step that reaches the batch size, which
+/// adds at most about 150 KB (pipeline.rs `FEED_SLICE`, `CAN_STEP`): no regrowth.
+fn batch_capacity(batch_bytes: usize) -> usize {
+    batch_bytes + batch_bytes / 2 + (192 << 10)
+}
 
 fn format_by_name(name: &str) -> PyResult<Format> {
     match name {
@@ -125,7 +132,7 @@ impl<T> NoGil<T> {
 }
 
 /// `DecodeRun(path, format, protocol=None, bus=None, device=None, errors_only=False,
-/// colour=False, absolute_time=False, batch_bytes=1 MiB)`: iterate it for the output bytes.
+/// colour=False, absolute_time=False, batch_bytes=256 KiB)`: iterate it for the output bytes.
 #[pyclass(name = "DecodeRun", module = "analyzer._native", unsendable)]
 struct PyDecodeRun {
     run: DecodeRun,
@@ -147,7 +154,7 @@ struct FdWriter {
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-const IN_FLIGHT: usize = 2;
+const IN_FLIGHT: usize = 4;
 
 impl FdWriter {
     fn start(fd: i32) -> FdWriter {
@@ -175,9 +182,11 @@ impl FdWriter {
         }
     }
 
-    /// A buffer to fill: one the thread has written, or a new one.
-    fn buffer(&self) -> Vec<u8> {
-        self.empty.try_recv().unwrap_or_default()
+    /// A buffer to fill: one the thread has written, or a new one of `capacity` bytes.
+    fn buffer(&self, capacity: usize) -> Vec<u8> {
+        self.empty
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(capacity))
     }
 
     fn error(&self) -> io::Result<()> {
@@ -253,10 +262,11 @@ impl PyDecodeRun {
             let run = py.allow_threads(|| NoGil(DecodeRun::open(path, opts)));
             run.into_inner().map_err(|e| os_error(e, path))?
         };
+        let batch_bytes = batch_bytes.max(1);
         Ok(PyDecodeRun {
             run,
-            buf: Vec::new(),
-            batch_bytes: batch_bytes.max(1),
+            buf: Vec::with_capacity(batch_capacity(batch_bytes)),
+            batch_bytes,
             done: false,
             writer: None,
         })
@@ -303,7 +313,7 @@ impl PyDecodeRun {
         }
         let writer = self.writer.get_or_insert_with(|| FdWriter::start(fd));
         while !self.done {
-            let mut buf = writer.buffer();
+            let mut buf = writer.buffer(batch_capacity(self.batch_bytes));
             let work = NoGil((&mut self.run, &mut buf, self.batch_bytes));
             let more = py.allow_threads(move || {
                 let (run, buf, max) = work.into_inner();

@@ -16,7 +16,10 @@
 
 use crate::flags as F;
 use crate::framing::{ByteStreamDecoder, Framing, Stream, NEED_MORE};
-use crate::model::{Fields, Notes, Record, Str, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE};
+use crate::hash::FrameMemo;
+use crate::model::{
+    Fields, Notes, Record, SharedFields, Str, Text, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE,
+};
 use crate::pyfloat::py_repr;
 use crate::registers::{self, opening_mm};
 use std::borrow::Cow;
@@ -712,8 +715,8 @@ struct Entry {
     device: Option<i64>,
     code: Option<i64>,
     name: Option<Str>,
-    fields: Fields,
-    summary: String,
+    fields: SharedFields,
+    summary: Text,
     errors: Vec<String>,
     warnings: Vec<String>,
     pair_key: Option<[i64; 2]>,
@@ -724,22 +727,34 @@ struct Entry {
 
 impl Entry {
     /// A record of these bytes (fresh lists: the pairing and lint stages append to them).
+    /// (One struct literal: built in place, not built empty and then copied.)
+    #[inline]
     fn record(&self, s: &Stream, raw: &[u8], offset: u64, t: Option<f64>) -> Record {
-        let mut rec = Record::new(t, s.bus.clone(), EG2_SERIAL, FRAME, raw.to_vec());
-        rec.offset = Some(offset);
-        rec.direction = self.direction;
-        rec.device = self.device;
-        rec.code = self.code;
-        rec.name = self.name.clone();
-        rec.fields = self.fields.clone();
-        rec.errors = self.errors.clone();
-        rec.warnings = self.warnings.clone();
-        rec.summary = self.summary.clone();
-        rec.pair_key = self.pair_key;
-        rec.expects_response = self.expects;
-        rec.is_save = self.save;
-        rec.flags = self.flags.clone();
-        rec
+        Record {
+            t,
+            bus: s.bus.clone(),
+            protocol: EG2_SERIAL,
+            kind: FRAME,
+            length: raw.len(),
+            raw: raw.to_vec(),
+            offset: Some(offset),
+            index: None,
+            direction: self.direction,
+            device: self.device,
+            code: self.code,
+            name: self.name.clone(),
+            fields: self.fields.clone(),
+            errors: self.errors.clone(),
+            warnings: self.warnings.clone(),
+            summary: self.summary.clone(),
+            seq: -1,
+            pair: None,
+            latency_ms: None,
+            pair_key: self.pair_key,
+            expects_response: self.expects,
+            is_save: self.save,
+            flags: self.flags.clone(),
+        }
     }
 }
 
@@ -753,8 +768,8 @@ fn decode(raw: &[u8]) -> Entry {
             device: None,
             code: None,
             name: None,
-            fields: vec![(key("data"), Value::Str(Cow::Owned(hex(raw))))],
-            summary: "malformed frame".to_string(),
+            fields: vec![(key("data"), Value::Str(Cow::Owned(hex(raw))))].into(),
+            summary: Text::from("malformed frame"),
             errors: vec![format!(
                 "malformed frame: {n} bytes do not fit a header and its length byte"
             )],
@@ -831,8 +846,8 @@ fn decode(raw: &[u8]) -> Entry {
         device: Some(device as i64),
         code: Some(code as i64),
         name: Some(name),
-        fields,
-        summary,
+        fields: fields.into(),
+        summary: summary.into(),
         errors: notes.errors,
         warnings: notes.warnings,
         pair_key: Some([device as i64, code as i64]),
@@ -851,25 +866,28 @@ fn short_candidate(buf: &[u8], pos: usize) -> i64 {
     }
 }
 
-/// Memoised decodes, cleared when full: a live bus repeats few frames, memory stays flat.
-/// (The Python keeps 50,000; the memo never changes the output, and here a smaller one is as
-/// fast on benchmark traffic while all-distinct frames stay under ~30 MB instead of ~90.)
-const CACHE_MAX: usize = 8192;
-
-type FrameMap = crate::hash::FastMap<Box<[u8]>, Entry>;
+/// Memoised decodes per generation (crate::hash::FrameMemo: at most two generations held): a
+/// live bus repeats few frames, memory stays flat. (The Python keeps 50,000; the memo never
+/// changes the output, and here fewer are as fast on benchmark traffic while all-distinct
+/// frames stay in a few MB.)
+const CACHE_GENERATION: usize = 4096;
 
 /// The protocol hooks of the regular serial protocol (the Python `Eg2SerialDecoder`'s
 /// overrides); [`Eg2SerialDecoder`] is the framer driving them.
-#[derive(Debug)]
 pub struct Eg2Serial {
-    cache: FrameMap,
+    cache: FrameMemo<Entry>,
+}
+
+impl std::fmt::Debug for Eg2Serial {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Eg2Serial")
+    }
 }
 
 impl Default for Eg2Serial {
     fn default() -> Self {
-        // a polling loop's few dozen frames, and a moving gripper's readings, without rehashing
         Eg2Serial {
-            cache: FrameMap::with_capacity_and_hasher(1024, Default::default()),
+            cache: FrameMemo::new(CACHE_GENERATION),
         }
     }
 }
@@ -925,16 +943,9 @@ impl Framing for Eg2Serial {
         _valid: bool,
     ) -> Record {
         // valid is implied by raw (the checksum is part of it), so the cache key is raw alone
-        if let Some(e) = self.cache.get(raw) {
-            return e.record(s, raw, offset, t);
-        }
-        if self.cache.len() >= CACHE_MAX {
-            self.cache.clear();
-        }
-        let e = decode(raw);
-        let rec = e.record(s, raw, offset, t);
-        self.cache.insert(raw.into(), e);
-        rec
+        self.cache
+            .get_or_insert_with(raw, || decode(raw))
+            .record(s, raw, offset, t)
     }
 
     fn truncated_reason(&self, raw: &[u8]) -> String {
@@ -997,7 +1008,7 @@ mod tests {
             &[0xF4, 0x01, 0x64, 0x00],
         );
         let r = &decode_all(&f)[0];
-        assert_eq!(r.summary, "catch speed=500 force=100 g");
+        assert_eq!(&*r.summary, "catch speed=500 force=100 g");
         assert_eq!(r.name.as_deref(), Some("CMD_MC_MOVE_CATCH_XG"));
         assert!(r.expects_response);
     }
@@ -1012,7 +1023,7 @@ mod tests {
         );
         let r = &decode_all(&f)[0];
         assert_eq!(
-            r.summary,
+            &*r.summary,
             "-> state=4 closing, stall, reserved bit 5, 37 °C, position=500 (35.0 mm), \
              force setting=100 g"
         );
@@ -1026,7 +1037,7 @@ mod tests {
     fn hand_values_odd_byte() {
         let f = frame([0xEB, 0x90], 1, cmd::READ_DRVALL_SPEED, &[7]);
         assert_eq!(
-            decode_all(&f)[0].summary,
+            &*decode_all(&f)[0].summary,
             "read speed (hand-compatible) values= extra=07"
         );
     }

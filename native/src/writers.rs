@@ -13,9 +13,10 @@
 
 use crate::flags::ESTIMATED_TIME;
 use crate::json::{push_ascii, push_int as push_i64, push_map, push_str, push_u64};
-use crate::model::{Record, FRAME, REQUEST, RESPONSE};
+use crate::model::{Record, Segment, FRAME, REQUEST, RESPONSE};
 use crate::pyfloat::{push_json_float, push_py_repr};
 use std::fmt::Write;
+use std::ops::Range;
 use std::sync::Arc;
 
 /// The output formats of `eg2scope decode --format`.
@@ -33,7 +34,9 @@ pub struct TextOptions {
     pub absolute_time: bool,
 }
 
-/// Formats records, in output order, into `out` (the caller flushes `out` in batches).
+/// Formats records, in output order, into `out` (the caller flushes `out` in batches). The
+/// writers append UTF-8 text only, and may rely on `out` holding nothing else (the callers
+/// hand them buffers holding what writers wrote, or empty ones).
 pub trait RecordWriter {
     /// What comes before the first record (the CSV header), if anything.
     fn begin(&mut self, _out: &mut Vec<u8>) {}
@@ -135,12 +138,23 @@ fn push_json_head(out: &mut String, rec: &Record) {
 
 /// The keys after `kind`.
 fn push_json_rest(out: &mut String, rec: &Record) {
+    push_json_ids(out, rec);
+    push_json_segment(out, rec);
+    push_json_tail(out, rec);
+}
+
+/// `,"offset":…,"index":…,"length":…`
+fn push_json_ids(out: &mut String, rec: &Record) {
     out.push_str(",\"offset\":");
     push_opt_u64(out, rec.offset);
     out.push_str(",\"index\":");
     push_opt_u64(out, rec.index);
     out.push_str(",\"length\":");
     push_u64(out, rec.length as u64);
+}
+
+/// `,"direction":…` through `,"raw":"…"`: what a memoised decode fixes (with the raw bytes).
+fn push_json_segment(out: &mut String, rec: &Record) {
     out.push_str(",\"direction\":");
     push_opt_json_str(out, rec.direction);
     out.push_str(",\"device\":");
@@ -153,7 +167,18 @@ fn push_json_rest(out: &mut String, rec: &Record) {
     push_map(out, &rec.fields);
     out.push_str(",\"raw\":\"");
     push_hex(out, &rec.raw); // hex digits and spaces: nothing to escape
-    out.push_str("\",\"errors\":");
+    out.push('"');
+}
+
+/// The keys after `raw`.
+fn push_json_tail(out: &mut String, rec: &Record) {
+    push_json_notes(out, rec);
+    push_json_links(out, rec);
+}
+
+/// `,"errors":…,"warnings":…,"flags":…,"summary":…`
+fn push_json_notes(out: &mut String, rec: &Record) {
+    out.push_str(",\"errors\":");
     push_str_list(out, &rec.errors);
     out.push_str(",\"warnings\":");
     push_str_list(out, &rec.warnings);
@@ -161,6 +186,10 @@ fn push_json_rest(out: &mut String, rec: &Record) {
     push_str_list(out, &rec.flags);
     out.push_str(",\"summary\":");
     push_str(out, &rec.summary);
+}
+
+/// `,"seq":…,"pair":…,"latency_ms":…}`
+fn push_json_links(out: &mut String, rec: &Record) {
     out.push_str(",\"seq\":");
     push_i64(out, rec.seq);
     out.push_str(",\"pair\":");
@@ -170,10 +199,28 @@ fn push_json_rest(out: &mut String, rec: &Record) {
     out.push('}');
 }
 
-/// One JSON object per record and line.
+/// `push_json_links` and the end of the line, seq copied from `seq_text` (where the same
+/// number was written already) if given.
+fn push_json_links_after(out: &mut String, rec: &Record, seq_text: Option<Range<usize>>) {
+    match seq_text {
+        Some(span) => {
+            out.push_str(",\"seq\":");
+            // SAFETY: the span holds ASCII digits written by push_u64, so `out` stays UTF-8
+            unsafe { out.as_mut_vec() }.extend_from_within(span);
+            out.push_str(",\"pair\":");
+            push_opt_i64(out, rec.pair);
+            out.push_str(",\"latency_ms\":");
+            push_opt_json_float(out, rec.latency_ms);
+            out.push('}');
+        }
+        None => push_json_links(out, rec),
+    }
+    out.push('\n');
+}
+
+/// One JSON object per record and line, formatted straight into the output buffer.
 #[derive(Default)]
 pub struct JsonlWriter {
-    buf: String,
     /// `push_json_head` of the last record, and what it was made of: the same bus (the Arc is
     /// held, so its address cannot be reused) and the same static protocol and kind strings
     /// give the same text, copied at once instead of escaped again.
@@ -182,7 +229,7 @@ pub struct JsonlWriter {
 }
 
 impl JsonlWriter {
-    fn push_head(&mut self, rec: &Record) {
+    fn push_head(&mut self, out: &mut String, rec: &Record) {
         let same = matches!(&self.head_of, Some((bus, protocol, kind))
             if Arc::ptr_eq(bus, &rec.bus)
                 && std::ptr::eq(*protocol, rec.protocol)
@@ -192,19 +239,84 @@ impl JsonlWriter {
             push_json_head(&mut self.head, rec);
             self.head_of = Some((rec.bus.clone(), rec.protocol, rec.kind));
         }
-        self.buf.push_str(&self.head);
+        out.push_str(&self.head);
+    }
+
+    /// The line of `rec`, appended to `out`.
+    fn line(&mut self, out: &mut String, rec: &Record) {
+        out.push_str("{\"t\":");
+        push_opt_json_float(out, rec.t);
+        self.push_head(out, rec);
+        // offset or index: the same number as seq in a single-stream decode (kept to copy)
+        out.push_str(",\"offset\":");
+        let offset_at = out.len();
+        push_opt_u64(out, rec.offset);
+        let offset_span = offset_at..out.len();
+        out.push_str(",\"index\":");
+        let index_at = out.len();
+        push_opt_u64(out, rec.index);
+        let index_span = index_at..out.len();
+        out.push_str(",\"length\":");
+        push_u64(out, rec.length as u64);
+        let seq = u64::try_from(rec.seq).ok();
+        let seq_text = if seq.is_some() && seq == rec.offset {
+            Some(offset_span)
+        } else if seq.is_some() && seq == rec.index {
+            Some(index_span)
+        } else {
+            None
+        };
+        // the segments of records that share their decode: formatted once, then copied
+        let fields = &rec.fields;
+        let quiet = match fields.segment() {
+            Some(seg) if seg.matches(rec) => {
+                out.push_str(&seg.text);
+                seg.quiet_text(rec)
+            }
+            Some(_) => {
+                push_json_segment(out, rec);
+                None
+            }
+            None => {
+                let start = out.len();
+                push_json_segment(out, rec);
+                if fields.is_shared() {
+                    let end = out.len();
+                    push_json_notes(out, rec);
+                    let quiet =
+                        (rec.errors.is_empty() && rec.warnings.is_empty() && rec.flags.is_empty())
+                            .then(|| (rec.summary.clone(), out[end..].into()));
+                    fields.set_segment(|| Segment {
+                        direction: rec.direction,
+                        device: rec.device,
+                        code: rec.code,
+                        name: rec.name.clone(),
+                        raw: rec.raw.as_slice().into(),
+                        text: out[start..end].into(),
+                        quiet,
+                    });
+                    push_json_links_after(out, rec, seq_text);
+                    return;
+                }
+                None
+            }
+        };
+        match quiet {
+            Some(text) => out.push_str(text),
+            None => push_json_notes(out, rec),
+        }
+        push_json_links_after(out, rec, seq_text);
     }
 }
 
 impl RecordWriter for JsonlWriter {
     fn write(&mut self, rec: &Record, out: &mut Vec<u8>) {
-        self.buf.clear();
-        self.buf.push_str("{\"t\":");
-        push_opt_json_float(&mut self.buf, rec.t);
-        self.push_head(rec);
-        push_json_rest(&mut self.buf, rec);
-        self.buf.push('\n');
-        out.extend_from_slice(self.buf.as_bytes());
+        // no scratch line copied over: `out` itself, as a String for the call (it holds the
+        // writers' text only: UTF-8, see `RecordWriter`) and handed back
+        // SAFETY: the bytes are UTF-8 (the trait's contract) and only text is appended
+        let mut text = unsafe { String::from_utf8_unchecked(std::mem::take(out)) };
+        self.line(&mut text, rec);
+        *out = text.into_bytes();
     }
 }
 
@@ -571,7 +683,8 @@ mod tests {
             (Cow::Borrowed("speed"), Value::Int(500)),
             (Cow::Borrowed("x"), Value::Float(0.5)),
             (Cow::Borrowed("s"), Value::Str(Cow::Borrowed("a,\"b\""))),
-        ];
+        ]
+        .into();
         r.summary = "catch speed=500".into();
         r.seq = 7;
         r.pair = Some(6);
@@ -602,6 +715,43 @@ mod tests {
              \"flags\":[],\"summary\":\"catch speed=500\",\"seq\":7,\"pair\":6,\
              \"latency_ms\":0.405}\n"
         );
+    }
+
+    /// Records sharing one decode (the same `fields` and summary) reuse its JSON text only
+    /// where they agree with the record it was made from: every line as the uncached path
+    /// writes it.
+    #[test]
+    fn shared_decodes_write_as_unshared() {
+        let first = rec();
+        let mut recs = vec![first.clone(), first.clone()];
+        let mut r = first.clone();
+        r.raw = vec![0xEB, 0x90, 0x02]; // other bytes
+        recs.push(r);
+        let mut r = first.clone();
+        r.warnings.push("late".into()); // a note added after decoding
+        r.flags.push("x");
+        recs.push(r);
+        let mut r = first.clone();
+        r.summary = "catch speed=500".into(); // equal text, another Arc
+        recs.push(r);
+        let mut r = first.clone();
+        r.name = None;
+        r.direction = Some(REQUEST);
+        recs.push(r);
+        let mut r = first.clone();
+        r.fields.make_mut().push((Cow::Borrowed("y"), Value::Null)); // copied, then changed
+        recs.push(r);
+        recs.push(first.clone());
+        let mut expected = String::new();
+        for r in &recs {
+            push_record_json(&mut expected, r);
+            expected.push('\n');
+        }
+        assert_eq!(
+            write_all(Format::Jsonl, TextOptions::default(), &recs),
+            expected
+        );
+        assert!(first.fields.segment().is_some());
     }
 
     #[test]

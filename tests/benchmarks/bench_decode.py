@@ -73,8 +73,12 @@ def write_inputs(out: Path, n: int) -> dict[str, Path]:
     return paths
 
 
-def timed(cmd: list[str]) -> tuple[float, float]:
-    """Wall seconds and peak RSS (MB) of one child process, its output discarded."""
+def timed(cmd: list[str], sink: Path | None = None) -> tuple[float, float]:
+    """Wall seconds and peak RSS (MB) of one child process, its output discarded. The last
+    run's ``sink`` is removed first, outside the clock: freeing hundreds of MB of an old output
+    (when the new one is renamed over it) is not decoding."""
+    if sink is not None:
+        sink.unlink(missing_ok=True)
     start = time.perf_counter()
     with open(os.devnull, "wb") as devnull:
         proc = subprocess.Popen(cmd, stdout=devnull, stderr=subprocess.PIPE)
@@ -94,11 +98,13 @@ def _tshark(pcap: Path) -> list[str] | None:
     return [tshark, "-r", str(pcap), "-T", "fields", *fields]
 
 
-def measure(name: str, cmd: list[str], frames: int, runs: int) -> tuple[float, float]:
+def measure(
+    name: str, cmd: list[str], frames: int, runs: int, sink: Path | None = None
+) -> tuple[float, float]:
     """Median frames/s and the highest peak RSS of ``runs`` runs."""
     walls, rss = [], []
     for _ in range(runs):
-        w, m = timed(cmd)
+        w, m = timed(cmd, sink)
         walls.append(w)
         rss.append(m)
     wall = statistics.median(walls)
@@ -136,7 +142,7 @@ def main() -> int:
         cases["can (tshark)"] = tshark
     # interleaved protocol by protocol, so a noisy neighbour hits every engine alike
     order = sorted(cases, key=lambda k: (k.split()[0] != "can", k.split()[0]))
-    results = {name: measure(name, cases[name], args.frames, args.runs) for name in order}
+    results = {name: measure(name, cases[name], args.frames, args.runs, sink) for name in order}
     sink.unlink(missing_ok=True)
     return report(results, "native" in engines)
 
