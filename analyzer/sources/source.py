@@ -71,9 +71,21 @@ class LiveSource(Source):
             self.on_started()
 
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
+        """A batch every ``LIVE_BATCH_S`` (at once after a full one: a backlog). Taking what
+        waits as soon as the decoding is free would decode a few frames at a time, all the
+        time: the capture threads, whose every receive gives up Python's GIL, would have to
+        win it back from the decoding for every frame, at a cost greater than the frame's.
+        Decoding in bursts leaves the capture threads the GIL in between."""
         get = self.queue.get_batch
+        due = time.monotonic()
         while not stop.is_set():
+            wait = due - time.monotonic()
+            if wait > 0 and stop.wait(wait):
+                break
+            due = time.monotonic() + LIVE_BATCH_S
             batch = get(LIVE_BATCH_S, LIVE_BATCH_ITEMS)
+            if len(batch) >= LIVE_BATCH_ITEMS:
+                due = 0.0
             drops = self._drops()
             if drops is not None:
                 batch.append(drops)

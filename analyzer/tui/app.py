@@ -44,6 +44,7 @@ from .widgets.registers import RegisterWatch
 
 DETAIL_S = 0.08  # the detail pane follows the cursor at most this often
 DETAIL_FOLLOW_S = 0.5  # ... and the newest record, while following, at most this often
+PANELS_S = 0.5  # the visible panel is redrawn this often (ages, fading highlights)
 
 
 @dataclass
@@ -87,6 +88,7 @@ class Eg2ScopeApp(App[int]):
         self.panels_stale = False
         self._detail_due: int | None = None
         self._detail_timer: Timer | None = None
+        self._status = ""
         self.sub_title = plan.title
 
     # -- layout ----------------------------------------------------------------------------
@@ -131,7 +133,7 @@ class Eg2ScopeApp(App[int]):
         if self.trigger:
             self.feed.arm(self.trigger)
         self.set_interval(0.25, self.show_status)
-        self.set_interval(0.25, self.show_panels)
+        self.set_interval(PANELS_S, self.show_panels)
         self.show_status()
         self.run_session()
 
@@ -168,7 +170,7 @@ class Eg2ScopeApp(App[int]):
             self.show_panels()
 
     def show_panels(self) -> None:
-        """Redraw the visible panel (4 times a second; hidden ones are drawn when shown)."""
+        """Redraw the visible panel (``PANELS_S``; hidden ones are drawn when shown)."""
         active = self.main_screen.query_one(TabbedContent).active
         snap = self.snapshot
         if active == "devices":
@@ -246,7 +248,10 @@ class Eg2ScopeApp(App[int]):
         return " | ".join(parts)
 
     def show_status(self) -> None:
-        self.main_screen.query_one("#status", Static).update(self.status_text())
+        text = self.status_text()
+        if text != self._status:  # one line of fixed height: no layout needed
+            self._status = text
+            self.main_screen.query_one("#status", Static).update(text, layout=False)
 
     # -- selection, detail, hex --------------------------------------------------------------
 

@@ -5,6 +5,10 @@ into the recording, which only that thread may write.
 
 The trigger (``--freeze-on``) is checked here, on every record as it is stored, so the first
 match is found even when a batch holds thousands of records.
+
+The device panel's changes are found by comparing each gripper's state with the one posted
+before (cansniffer's way: a value that changed), so the feed asks the session for no state
+samples: a sample copies the whole state for every reading, a cost the screen does not need.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from .messages import DeviceRow, FeedUpdate
 from .store import RecordStore
 
 POST_INTERVAL_S: Final = 0.1  # 10 updates a second
-PANELS_INTERVAL_S: Final = 0.5  # the panels' tables (problems, registers, latency) this often
+PANELS_INTERVAL_S: Final = 1.0  # the panels' tables (problems, registers, latency) this often
 
 TRIGGERS: Final[dict[str, Callable[[Record], bool]]] = {
     "error": lambda r: bool(r.errors),
@@ -45,7 +49,7 @@ class TuiFeed(Listener):
     """See the module doc. ``post``: where updates go (the app); ``states``: the session
     tracker's states, read on the session's thread only."""
 
-    wants_states = True
+    wants_states = False
 
     def __init__(self, store: RecordStore | None = None) -> None:
         self.store = store if store is not None else RecordStore()
@@ -58,6 +62,7 @@ class TuiFeed(Listener):
         self.trigger: str | None = None  # armed: the TRIGGERS key
         self._fired: int | None = None
         self._changed: set[tuple[str, int, str]] = set()
+        self._posted: dict[tuple[str, int], dict[str, Any]] = {}  # the states last posted
         self._events: list[SourceEvent] = []
         self._marks: list[tuple[float | None, str, int | None]] = []
         self._lock = threading.Lock()  # guards _marks and trigger (set from the app)
@@ -134,12 +139,21 @@ class TuiFeed(Listener):
             self.recorder.write_mark(t, name, seq)
 
     def _devices(self) -> list[DeviceRow]:
+        """Every gripper's state, a copy; the fields that changed since the last post go into
+        ``_changed``."""
         if self.states is None:
             return []
-        return [
-            DeviceRow(st.bus, st.device, st.protocol, st.t, dict(st.values))
-            for st in list(self.states().values())
-        ]
+        rows = []
+        changed, posted = self._changed, self._posted
+        for key, st in list(self.states().items()):
+            values = dict(st.values)
+            before = posted.get(key, {})
+            for name, value in values.items():
+                if value is not None and before.get(name) != value:
+                    changed.add((st.bus, st.device, name))
+            posted[key] = values
+            rows.append(DeviceRow(st.bus, st.device, st.protocol, st.t, values))
+        return rows
 
     def _post(self, mono: float, done: bool = False) -> None:
         self._next_post = mono + POST_INTERVAL_S

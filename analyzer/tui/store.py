@@ -6,7 +6,9 @@ would not fit the 600 MB budget. The store keeps what every row and every filter
 columns (``array``: 8 bytes or less per value; bus, name, protocol and kind as small integers
 into intern tables; every flag code as one bit of a 64-bit mask) and the whole record (fields,
 errors, warnings, raw) as JSON in zlib-compressed blocks of ``BLOCK`` records, opened only for
-the detail pane, exports and searches.
+the detail pane, exports and searches. A block is one JSON array, written by one ``orjson`` call
+when it is full (one call per record cost more than the rest of storing); until then its
+records' details wait as tuples.
 
 One thread appends (the session's), any thread reads: the columns only grow, ``count`` is
 published after a batch is complete, and readers look only below it. Block compression swaps
@@ -19,8 +21,7 @@ import threading
 import zlib
 from array import array
 from bisect import bisect_left
-from collections.abc import Iterable, Iterator
-from itertools import pairwise
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any, Final
 
 import orjson
@@ -46,6 +47,11 @@ DIRECTIONS: Final = {None: 0, REQUEST: 1, RESPONSE: 2}
 DIRECTION_NAMES: Final = (None, REQUEST, RESPONSE)
 
 
+def _filled(values: Sequence[Any], none: Any) -> Sequence[Any]:
+    """``values`` with None replaced by ``none`` (the column's marker for "no value")."""
+    return values if None not in values else [none if v is None else v for v in values]
+
+
 class Interner:
     """Strings to small integers and back (bus names, manual names, protocols, kinds)."""
 
@@ -62,6 +68,14 @@ class Interner:
 
     def get(self, name: str) -> int | None:
         return self.ids.get(name)
+
+    def ids_of(self, names: list[str]) -> list[int]:
+        """The ids of ``names`` (new ones numbered in order of first appearance)."""
+        ids = self.ids
+        for name in dict.fromkeys(names):
+            if name not in ids:
+                self.id(name)
+        return [ids[name] for name in names]
 
     def __getitem__(self, i: int) -> str:
         return self.names[i]
@@ -124,8 +138,8 @@ class RecordStore:
         self.t_last: float | None = None  # the latest time seen
         self._summaries: dict[str, str] = {}
         self._blocks: list[bytes] = []
-        self._open: list[bytes] = []
-        self._cache: dict[int, list[bytes]] = {}  # a few decompressed blocks
+        self._open: list[tuple[Any, ...]] = []  # the details of the block being filled
+        self._cache: dict[int, list[Any]] = {}  # a few decompressed, parsed blocks
         self._seq_sorted = True
 
     def __len__(self) -> int:
@@ -139,77 +153,66 @@ class RecordStore:
         if not records:
             return
         times = [r.t for r in records]
-        known = [t for t in times if t is not None]
+        known: list[float] = [t for t in times if t is not None]
         if known:
             if self.t0 is None:
                 self.t0 = known[0]
             top = max(known)
             if self.t_last is None or top > self.t_last:
                 self.t_last = top
-        self.t.extend([NAN if t is None else t for t in times])
+        self.t.extend(_filled(times, NAN))
         seqs = [r.seq for r in records]
-        if self._seq_sorted and (
-            (self.seq and seqs[0] < self.seq[-1]) or any(a > b for a, b in pairwise(seqs))
-        ):
+        if self._seq_sorted and ((self.seq and seqs[0] < self.seq[-1]) or seqs != sorted(seqs)):
             self._seq_sorted = False
         self.seq.extend(seqs)
-        bus_id, name_id, proto_id, kind_id = (
-            self.buses.id,
-            self.names.id,
-            self.protocols.id,
-            self.kinds.id,
-        )
-        self.bus.extend([bus_id(r.bus) for r in records])
-        self.device.extend([NONE_DEVICE if r.device is None else r.device for r in records])
+        self.bus.extend(self.buses.ids_of([r.bus for r in records]))
+        self.device.extend(_filled([r.device for r in records], NONE_DEVICE))
         directions = DIRECTIONS
         self.direction.extend([directions.get(r.direction, 0) for r in records])
         self.name.extend(
-            [name_id(r.name or (r.protocol if r.kind == FRAME else r.kind)) for r in records]
+            self.names.ids_of(
+                [r.name or (r.protocol if r.kind == FRAME else r.kind) for r in records]
+            )
         )
-        self.protocol.extend([proto_id(r.protocol) for r in records])
-        self.kind.extend([kind_id(r.kind) for r in records])
+        self.protocol.extend(self.protocols.ids_of([r.protocol for r in records]))
+        self.kind.extend(self.kinds.ids_of([r.kind for r in records]))
         mask = self.flag_bits.mask
         self.flags.extend([mask(r.flags) if r.flags else 0 for r in records])
         self.severity.extend(
             [ERROR if r.errors else WARNING if r.warnings else OK for r in records]
         )
-        self.latency.extend([NAN if r.latency_ms is None else r.latency_ms for r in records])
-        self.pair.extend([NONE_SEQ if r.pair is None else r.pair for r in records])
+        self.latency.extend(_filled([r.latency_ms for r in records], NAN))
+        self.pair.extend(_filled([r.pair for r in records], NONE_SEQ))
         summaries = self._summaries
         if len(summaries) >= SUMMARY_INTERN_LIMIT:
             summaries.clear()
         intern = summaries.setdefault
         self.summary.extend([intern(r.summary, r.summary) for r in records])
-        dumps, opts = orjson.dumps, orjson.OPT_NON_STR_KEYS
-        self._add_lines(
+        self._add_details(
             [
-                dumps(
-                    (
-                        r.fields,
-                        r.errors,
-                        r.warnings,
-                        r.flags,
-                        r.raw.hex(),
-                        r.code,
-                        r.offset,
-                        r.index,
-                        r.length,
-                    ),
-                    default=json_default,
-                    option=opts,
+                (
+                    r.fields,
+                    r.errors,
+                    r.warnings,
+                    r.flags,
+                    r.raw.hex(),
+                    r.code,
+                    r.offset,
+                    r.index,
+                    r.length,
                 )
                 for r in records
             ]
         )
         self.count = len(self.seq)
 
-    def _add_lines(self, lines: list[bytes]) -> None:
-        while lines:
+    def _add_details(self, details: list[tuple[Any, ...]]) -> None:
+        while details:
             room = BLOCK - len(self._open)
-            self._open.extend(lines[:room])
-            lines = lines[room:]
+            self._open.extend(details[:room])
+            details = details[room:]
             if len(self._open) == BLOCK:
-                packed = zlib.compress(b"\n".join(self._open), 1)
+                packed = zlib.compress(_dumps(self._open), 1)
                 with self.lock:
                     self._blocks.append(packed)
                     self._open = []
@@ -256,16 +259,17 @@ class RecordStore:
         block, pos = divmod(i, BLOCK)
         with self.lock:
             if block < len(self._blocks):
-                lines = self._cache.get(block)
-                if lines is None:
-                    lines = zlib.decompress(self._blocks[block]).split(b"\n")
+                details = self._cache.get(block)
+                if details is None:
+                    details = orjson.loads(zlib.decompress(self._blocks[block]))
                     if len(self._cache) >= 8:
                         self._cache.pop(next(iter(self._cache)))
-                    self._cache[block] = lines
-                line = lines[pos]
-            else:
-                line = self._open[pos]
-        found: list[Any] = orjson.loads(line)
+                    self._cache[block] = details
+                found: list[Any] = details[pos]
+                return found
+            waiting = self._open[pos]
+        # through JSON, as a stored block gives it back (lists, string keys)
+        found = orjson.loads(_dumps([waiting]))[0]
         return found
 
     def records(self, indices: Iterable[int]) -> Iterator[Record]:
@@ -315,3 +319,7 @@ class RecordStore:
             if column[i] >= t:
                 return i
         return None
+
+
+def _dumps(details: list[tuple[Any, ...]]) -> bytes:
+    return orjson.dumps(details, default=json_default, option=orjson.OPT_NON_STR_KEYS)

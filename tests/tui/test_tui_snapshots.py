@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 from conftest import CAPTURES, SIZE, capture_app, until
 
+from analyzer.tui.widgets.detail import DetailTree
 from analyzer.tui.widgets.devices import DevicePanel
 
 pytest.importorskip("pytest_textual_snapshot")
@@ -15,6 +16,8 @@ pytest.importorskip("pytest_textual_snapshot")
 async def replayed(pilot) -> None:
     app = pilot.app
     await until(pilot, lambda: app.done)
+    # the detail pane follows the newest record a moment later (DETAIL_FOLLOW_S)
+    await until(pilot, lambda: app.query_one(DetailTree).record is not None)
     app.query_one(DevicePanel).changed_at.clear()  # highlights fade with wall time
     app.show_panels()
     await pilot.pause()

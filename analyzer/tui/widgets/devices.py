@@ -80,8 +80,9 @@ def table_line(cells: list[Any], bold: bool = False) -> Text:
 
 class DevicePanel(ScrollView):
     """See the module doc. ``clock``: the time ages are measured against (the wall clock
-    live, the newest record's time in a capture). Lines are drawn on ``redraw()`` into
-    strips, and ``render_line`` only hands them out (the Line API: no layout pass)."""
+    live, the newest record's time in a capture). ``redraw()`` takes the rows as they are;
+    ``render_line`` draws a line the first time it is shown after that (the Line API: no
+    layout pass, and no work for the rows scrolled out of the panel)."""
 
     DEFAULT_CSS = "DevicePanel { height: 1fr; }"
 
@@ -91,8 +92,9 @@ class DevicePanel(ScrollView):
         self.rows: list[DeviceRow] = []
         self.latency: dict[DeviceKey, LatencyStats] = {}
         self.changed_at: dict[tuple[str, int, str], float] = {}
-        self.lines: list[Text] = [Text("no gripper heard yet")]
-        self._strips: list[Strip] | None = None
+        self._shown: list[DeviceRow] = []  # the rows as of the last redraw
+        self._at: tuple[float | None, float] = (None, 0.0)  # (clock, monotonic) of that redraw
+        self._strips: dict[int, Strip] = {}
 
     def take(self, rows: list[DeviceRow], changed: set[tuple[str, int, str]]) -> None:
         now = time.monotonic()
@@ -103,32 +105,41 @@ class DevicePanel(ScrollView):
     def redraw(self) -> None:
         if not self.rows:
             return
-        clock, mono = self.clock(), time.monotonic()
-        self.lines = [table_line([name for name, _ in COLUMNS], bold=True)]
-        self.lines += [table_line(self._cells(row, clock, mono)) for row in self.rows]
-        self._strips = None
-        self.virtual_size = Size(LINE_WIDTH, len(self.lines))
+        self._shown = self.rows
+        self._at = (self.clock(), time.monotonic())
+        self._strips = {}
+        self.virtual_size = Size(LINE_WIDTH, len(self._shown) + 1)
         self.refresh()
+
+    @property
+    def lines(self) -> list[Text]:
+        """Every line as of the last redraw: the heading, then one per gripper."""
+        if not self._shown:
+            return [Text("no gripper heard yet")]
+        return [self._line(position) for position in range(len(self._shown) + 1)]
+
+    def _line(self, position: int) -> Text:
+        if position == 0:
+            return table_line([name for name, _ in COLUMNS], bold=True)
+        clock, mono = self._at
+        return table_line(self._cells(self._shown[position - 1], clock, mono))
 
     def notify_style_update(self) -> None:
         super().notify_style_update()
-        self._strips = None
+        self._strips = {}
 
     def render_line(self, y: int) -> Strip:
-        if self._strips is None:
-            base = self.rich_style
-            console = self.app.console
-            self._strips = []
-            for text in self.lines:
-                line = text.copy()
-                line.stylize_before(base)
-                self._strips.append(Strip(line.render(console), line.cell_len))
         scroll_x, scroll_y = self.scroll_offset
         width = self.size.width
         position = scroll_y + y
-        if not 0 <= position < len(self._strips):
+        if not 0 <= position < len(self._shown) + 1:  # the heading, or the "no gripper" line
             return Strip.blank(width, self.rich_style)
-        return self._strips[position].crop_extend(scroll_x, scroll_x + width, self.rich_style)
+        strip = self._strips.get(position)
+        if strip is None:
+            line = self._line(position) if self._shown else self.lines[0]
+            line.stylize_before(self.rich_style)
+            strip = self._strips[position] = Strip(line.render(self.app.console), line.cell_len)
+        return strip.crop_extend(scroll_x, scroll_x + width, self.rich_style)
 
     def _cells(self, row: DeviceRow, clock: float | None, mono: float) -> list[Any]:
         v = derived(dict(row.values))

@@ -132,7 +132,18 @@ class FrameList(ScrollView, can_focus=True):
         self.refresh()
 
     def _resize(self) -> None:
-        self.virtual_size = Size(LINE_WIDTH, self.row_count)
+        size = Size(LINE_WIDTH, self.row_count)
+        if size == self.virtual_size:
+            return
+        height = self.scrollable_content_region.height
+        if height and min(size.height, self.virtual_size.height) > height:
+            # longer, with the scroll bar already shown: only the scroll bar changes. Setting
+            # virtual_size asks for a layout of the whole screen, 10 times a second on a live
+            # bus, which cost more than drawing the rows
+            self.set_reactive(FrameList.virtual_size, size)
+            self._scroll_update(size)
+        else:
+            self.virtual_size = size
 
     def restyle(self) -> None:
         """Forget the rendered lines (time mode, reference, search, marks or theme changed)."""
@@ -196,6 +207,12 @@ class FrameList(ScrollView, can_focus=True):
 
     def action_follow(self) -> None:
         self.move_to(self.row_count - 1, follow=True)
+
+    def on_resize(self, event: events.Resize) -> None:
+        # a scroll asked for before the list had its size (a capture decoded before the first
+        # layout) was clamped to the top: following, the newest row goes back into view
+        if self.follow and self.row_count:
+            self.move_to(self.row_count - 1, follow=True)
 
     def on_mouse_scroll_up(self, event: events.MouseScrollUp) -> None:
         self.follow = False
