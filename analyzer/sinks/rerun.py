@@ -2,19 +2,31 @@
 commands, errors, fault marks and bus health around them (the entity contract: docs/rerun.md,
 its names: ``analyzer/rerun_entities.py``).
 
-Values are buffered as typed columns per entity and sent in batches (``rerun_batch.py``: one
-Arrow record batch for the entities that share their rows, one chunk per entity; never one
-``log`` call per value): every ``flush_interval`` seconds (a live viewer is updated ten times a
-second), whenever ``max_rows`` records and samples are waiting, and at the end. Nothing is
-downsampled. Each row carries ``capture_time`` (the record's ``t``) and ``frame``
-(its ``seq``); a capture without timestamps (a raw serial dump) has ``frame`` only. The default
-blueprint is sent again whenever a gripper or bus appears.
+Values are buffered and sent as typed columns in batches (``rerun_batch.py``: one Arrow record
+batch for the entities that share their rows, one chunk per entity; never one ``log`` call per
+value): every ``flush_interval`` seconds (a live viewer is updated ten times a second), whenever
+``max_rows`` records and samples are waiting, and at the end. Nothing is downsampled. Each row
+carries ``capture_time`` (the record's ``t``) and ``frame`` (its ``seq``); a capture without
+timestamps (a raw serial dump) has ``frame`` only. The default blueprint is sent again whenever a
+gripper or bus appears.
+
+The hot path does as little per value as it can. A state sample is filed under its gripper and
+the fields it changed (its "shape": a CAN reply of force, opening, current and temperature is one
+shape, a reply of state and fault another): one C-level call cuts the plotted values out of it
+into the shape's row-major array, two appends add its time and seq; a shape's fields share their
+rows, so they go out as one record batch. Records are scanned with comprehensions, not a loop
+that looks at each one. Live, the session flushes at its ticks when a flush is due, and a timer
+thread flushes when a long batch keeps the session busy past that; the Arrow columns are built and
+sent outside the buffers' lock, so the session goes on decoding meanwhile.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from array import array
+from itertools import groupby
+from operator import attrgetter, itemgetter
 from typing import Any, Final
 
 import numpy as np
@@ -35,7 +47,7 @@ from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches
 
 NAN: Final = float("nan")  # no timestamp
 # a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
-# (12.5 a second) because they happen at the session's ticks, a step late at worst
+# (12.5 a second), at the session's ticks or, when a batch keeps it busy, from a timer thread
 LIVE_FLUSH_S: Final = 0.08
 CAPTURE_FLUSH_S: Final = 2.0  # a capture read at full speed: few, large chunks
 LAYOUT_EVERY_S: Final = 1.0  # the blueprint is sent again at most this often
@@ -55,29 +67,38 @@ _POLLS: Final = frozenset(
 # flags that say nothing is wrong: not logged as problems
 _QUIET_FLAGS: Final = frozenset({FOREIGN, ESTIMATED_TIME})
 _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ERROR"}
+# the state fields plotted, in the order their entities are sent
+_PLOTTED: Final = (*(s.field for s in ent.SERIES), *ent.LANES)
+
+_BUS = attrgetter("bus")
+_T = attrgetter("t")
+_SEQ = attrgetter("seq")
+_LATENCY = attrgetter("latency_ms")
 
 
-class _Columns:
+class _Entity:
+    """Where one series goes and how it looks: ``style`` is logged static with the first rows
+    (then None); ``convert`` turns a column of values into what is plotted (None: as it is)."""
+
+    __slots__ = ("convert", "kind", "path", "style")
+
+    def __init__(self, path: str, kind: str, style: Any = None, convert: Any = None) -> None:
+        self.path = path
+        self.kind = kind
+        self.style = style
+        self.convert = convert
+
+
+class _Columns(_Entity):
     """The rows of one entity waiting to be sent, as typed arrays (no conversion when sent):
     ``t`` in seconds (NaN: no timestamp), ``seq`` (None for entities that live on
     ``capture_time`` only: health rates, source events), ``values`` (numbers for scalars,
-    a list for lanes and text)."""
+    a list for text)."""
 
-    __slots__ = ("convert", "kind", "levels", "path", "seq", "style", "t", "values")
+    __slots__ = ("levels", "seq", "t", "values")
 
-    def __init__(
-        self,
-        path: str,
-        kind: str,
-        style: Any = None,
-        *,
-        frame: bool = True,
-        convert: Any = None,
-    ) -> None:
-        self.path = path
-        self.kind = kind
-        self.style = style  # static style, logged with the first rows (then None)
-        self.convert = convert  # value -> what is plotted (None: as it is)
+    def __init__(self, path: str, kind: str, style: Any = None, *, frame: bool = True) -> None:
+        super().__init__(path, kind, style)
         self.t = array("d")
         self.seq: array[int] | None = array("q") if frame else None
         self.values: Any = array("d") if kind == SCALAR else []
@@ -90,12 +111,6 @@ class _Columns:
         self.values.append(value)
         if self.kind == TEXT:
             self.levels.append(level)
-
-    def appenders(self) -> tuple[Any, Any, Any]:
-        """The append methods of t, seq and values, for the hot loop (the buffers are
-        emptied in place, so these stay valid)."""
-        assert self.seq is not None
-        return self.t.append, self.seq.append, self.values.append
 
     def take(self) -> tuple[np.ndarray, np.ndarray | None, Any, list[str]]:
         """The rows so far (t, seq, values, levels), copied; the columns start empty."""
@@ -111,36 +126,94 @@ class _Columns:
         return rows
 
 
-class _Gripper:
-    """One gripper's columns: state field -> columns, plus commands and fault marks."""
+# a field's rows: (field, t, seq, values)
+_Rows = tuple[str, np.ndarray, np.ndarray, Any]
 
-    __slots__ = ("appenders", "by_field", "commands", "force", "key", "marks")
+
+class _Shape:
+    """The samples of one gripper that changed the same fields (a reply to one kind of read),
+    as columns: times (NaN: none), seqs, and the plotted fields' values row by row (``fields``:
+    the plotted ones among them, in order), cut from each sample with one C-level call. A
+    sample with a value that is not a number (None: named without a value) goes to its
+    gripper's ``odd`` columns instead."""
+
+    __slots__ = ("add_seq", "add_t", "fields", "get", "gripper", "put", "seq", "t", "values")
+
+    def __init__(self, gripper: _Gripper, fields: tuple[str, ...]) -> None:
+        self.gripper = gripper
+        self.fields = fields
+        self.get = itemgetter(*fields)  # one field: the value, else a tuple
+        self._start()
+
+    def _start(self) -> None:
+        self.t = array("d")
+        self.seq = array("q")
+        self.values = array("d")
+        self.add_t = self.t.append
+        self.add_seq = self.seq.append
+        self.put = self.values.append if len(self.fields) == 1 else self.values.extend
+
+    def drop_partial(self) -> None:
+        """Undo what a failed ``put`` appended of the row it was adding."""
+        del self.values[len(self.seq) * len(self.fields) :]
+
+    def take(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, seq, values: one column per field); the shape starts empty."""
+        t, seq, values = self.t, self.seq, self.values
+        self._start()
+        columns = np.frombuffer(values, dtype=np.float64).reshape(len(seq), len(self.fields))
+        return np.frombuffer(t), np.frombuffer(seq, dtype=np.int64), columns
+
+
+class _Gripper:
+    """One gripper: its entities by state field, its shapes, commands and fault marks (times
+    and seqs; a mark sits at the force last read, found when it is sent)."""
+
+    __slots__ = (
+        "by_field",
+        "commands",
+        "force",
+        "key",
+        "mark_seq",
+        "mark_t",
+        "marks",
+        "odd",
+        "shapes",
+    )
 
     def __init__(self, bus: str, device: int) -> None:
         base = ent.gripper_path(bus, device)
         self.key = (bus, device)
-        self.by_field: dict[str, _Columns] = {
-            s.field: _Columns(
-                f"{base}/{s.entity}",
-                SCALAR,
-                ent.series_style(s),
-                convert=s.convert,
-            )
+        self.by_field: dict[str, _Entity] = {
+            s.field: _Entity(f"{base}/{s.entity}", SCALAR, ent.series_style(s), s.convert)
             for s in ent.SERIES
         }
-        self.by_field["state"] = _Columns(f"{base}/{ent.STATE}", LANE, ent.state_configuration())
-        self.by_field["fault"] = _Columns(f"{base}/{ent.FAULT}", LANE, ent.fault_configuration())
-        self.appenders = {field: c.appenders() for field, c in self.by_field.items()}
+        self.by_field["state"] = _Entity(f"{base}/{ent.STATE}", LANE, ent.state_configuration())
+        self.by_field["fault"] = _Entity(f"{base}/{ent.FAULT}", LANE, ent.fault_configuration())
         self.commands = _Columns(f"{base}/{ent.COMMANDS}", TEXT)
-        self.marks = _Columns(f"{base}/{ent.FAULT_MARKS}", SCALAR, ent.fault_marks_style())
-        self.force: Any = None  # the force last read: where a fault mark sits
+        self.marks = _Entity(f"{base}/{ent.FAULT_MARKS}", SCALAR, ent.fault_marks_style())
+        self.mark_t: list[float | None] = []  # marks of records with errors or fault flags
+        self.mark_seq: list[int] = []
+        self.shapes: list[_Shape] = []
+        self.odd: dict[str, _Columns] = {}  # field -> rows of samples not filed by shape
+        self.force: Any = None  # the force last read (sent): where a later fault mark sits
 
-    def readings(self) -> bool:
-        """Whether readings or settings wait to be sent (the gripper gets a column)."""
-        return any(c.values for c in self.by_field.values())
-
-    def columns(self) -> list[_Columns]:
-        return [*self.by_field.values(), self.commands, self.marks]
+    def take(self) -> tuple[list[_Rows], list[float | None], list[int]]:
+        """The rows waiting, per field (a shape's fields share their times and seqs), and the
+        marks of faulty records; the gripper starts empty."""
+        rows: list[_Rows] = []
+        for shape in self.shapes:
+            if shape.seq:
+                t, seq, columns = shape.take()
+                rows += [(f, t, seq, columns[:, i]) for i, f in enumerate(shape.fields)]
+        for field, c in self.odd.items():
+            if c.values:
+                t, odd_seq, values, _ = c.take()
+                assert odd_seq is not None
+                rows.append((field, t, odd_seq, values))
+        marks = self.mark_t, self.mark_seq
+        self.mark_t, self.mark_seq = [], []
+        return rows, *marks
 
 
 class _Bus:
@@ -217,7 +290,8 @@ def _silent(secs: np.ndarray) -> np.ndarray:
 class RerunListener(Listener):
     """Plots a session in Rerun. ``where``: an open ``RerunOutput``, a ``RerunTarget``, or a
     ``--rerun`` target string (``run.rrd``, ``spawn``, ``web``, a viewer URL). ``live``: a live
-    session (plots follow a sliding 10 s window; source events go to the error logs)."""
+    session (plots follow a sliding 10 s window; source events go to the error logs; a timer
+    thread keeps the flushes on their grid however long the session's batches take)."""
 
     wants_states = True
     label = "rerun"
@@ -245,55 +319,85 @@ class RerunListener(Listener):
         self.grippers: dict[tuple[str, int], _Gripper] = {}
         self.buses: dict[str, _Bus] = {}
         self.session_errors: _Columns | None = None
+        # (bus, device, *fields changed) -> the shape its samples are filed under; False: a
+        # shape with nothing plotted (a poll's last_command, a write's latency)
+        self._shapes: dict[tuple[Any, ...], _Shape | bool] = {}
         self._timed = self._untimed = False  # rows with and without capture_time were sent
         self._sent_layout: Layout | None = self.layout if live else None
         self._pending = 0
         self._next_flush = time.monotonic() + self.flush_interval  # when a flush is due
-        self._marked: set[tuple[str, int]] = set()  # (bus, seq) marked in this batch
         self._batches = Batches()
         self._next_layout = 0.0  # when the blueprint may be sent again
         self._closed = False
+        # the buffers: the session's calls and a flush's taking of what waits take turns on
+        # ``_lock`` (the sending is done outside it: the session goes on meanwhile); flushes
+        # take turns on ``_sending``. A batch's records and its samples are never sent apart
+        # (a fault mark is found once, at the force last read).
+        self._lock = threading.RLock()
+        self._batch_done = threading.Condition(self._lock)
+        self._sending = threading.Lock()
+        self._mid_batch = False
+        self._failure: BaseException | None = None  # the timer's, raised on the session's thread
+        self._stop_timer = threading.Event()
+        self._timer: threading.Thread | None = None
+        if live:
+            self._timer = threading.Thread(target=self._run_timer, name="rerun-flush", daemon=True)
+            self._timer.start()
 
     # -- what the session gives ------------------------------------------------------------
 
     def on_states(self, samples: list[StateSample]) -> None:
-        grippers = self.grippers
-        for s in samples:
-            g = grippers.get((s.bus, s.device)) or self._gripper(s.bus, s.device)
-            t, seq, appenders = NAN if s.t is None else s.t, s.seq, g.appenders
-            for field, value in s.changed.items():
-                add = appenders.get(field)
-                if add is not None and value is not None:
-                    add[0](t)
-                    add[1](seq)
-                    add[2](value)
-            if s.changed.get("fault") and (s.bus, seq) not in self._marked:  # a fault reading
-                self._mark(g, t, seq)
-        self._pending += len(samples)
+        with self._lock:
+            self._raise_failure()
+            shapes = self._shapes
+            for s in samples:
+                changed = s.changed
+                shape = shapes.get((s.bus, s.device, *changed))
+                if shape:
+                    try:
+                        shape.put(shape.get(changed))  # type: ignore[union-attr]
+                    except TypeError:  # None, or not a number
+                        self._odd(shape, s)  # type: ignore[arg-type]
+                        continue
+                    t = s.t
+                    shape.add_t(NAN if t is None else t)  # type: ignore[union-attr]
+                    shape.add_seq(s.seq)  # type: ignore[union-attr]
+                elif shape is None:
+                    self._new_shape(s)
+            self._pending += len(samples)
+            self._mid_batch = False
+            self._batch_done.notify_all()
 
     def on_records(self, records: list[Record]) -> None:
-        self._marked.clear()  # the seqs marked in this batch (its samples come next)
-        buses = self.buses
-        name: str | None = None
-        bus: _Bus | None = None
-        for rec in records:
-            if rec.bus != name:
-                name = rec.bus
+        with self._lock:
+            self._raise_failure()
+            self._mid_batch = True  # its samples come next
+            buses = self.buses
+            for name, group in groupby(records, _BUS):
+                recs = list(group)
                 bus = buses.get(name) or self._bus(name)
-            assert bus is not None
-            t = rec.t
-            if t is not None:
-                bus.times.append(t)
-            if rec.errors or rec.warnings:
-                self._problem(bus, rec)
-            elif rec.direction == REQUEST and (rec.protocol, rec.code) not in _POLLS:
-                self._command(rec, "INFO")
-            if rec.latency_ms is not None and t is not None:
-                latency = bus.latency
-                latency.t.append(t)  # a latency needs both times: never NaN
-                latency.seq.append(rec.seq)  # type: ignore[union-attr]
-                latency.values.append(rec.latency_ms)
-        self._pending += len(records)
+                times = list(map(_T, recs))
+                if None in times:
+                    times = [t for t in times if t is not None]
+                bus.times.fromlist(times)
+                for rec in [
+                    r
+                    for r in recs
+                    if r.errors
+                    or r.warnings
+                    or (r.direction == REQUEST and (r.protocol, r.code) not in _POLLS)
+                ]:
+                    if rec.errors or rec.warnings:
+                        self._problem(bus, rec)
+                    else:
+                        self._command(rec, "INFO")
+                timed = [r for r in recs if r.latency_ms is not None and r.t is not None]
+                if timed:  # a latency needs both times: never NaN
+                    latency = bus.latency
+                    latency.t.fromlist(list(map(_T, timed)))
+                    latency.seq.fromlist(list(map(_SEQ, timed)))  # type: ignore[union-attr]
+                    latency.values.fromlist(list(map(_LATENCY, timed)))
+            self._pending += len(records)
 
     def _problem(self, bus: _Bus, rec: Record) -> None:
         """A record with errors or warnings: the error log, a fault mark, the health counts."""
@@ -311,7 +415,9 @@ class RerunListener(Listener):
             if UNANSWERED in rec.flags:
                 bus.unanswered.append(t)
         if rec.device is not None and (rec.errors or DEVICE_FAULT in rec.flags):
-            self._mark(self._gripper_of(rec), t, rec.seq)
+            g = self._gripper_of(rec)
+            g.mark_t.append(t)
+            g.mark_seq.append(rec.seq)
         elif rec.direction == REQUEST and (rec.protocol, rec.code) not in _POLLS:
             self._command(rec, "INFO" if quiet else "WARN")
 
@@ -325,108 +431,210 @@ class RerunListener(Listener):
         A capture's events carry the wall clock, not the capture's: they are not plotted."""
         if not self.live or event.level < WARNING:
             return
-        bus = self.buses.get(event.bus)
-        if bus is not None:
-            columns = bus.errors
-        else:
-            if self.session_errors is None:
-                path = f"/{ent.SESSION}/{ent.ERRORS}"
-                self.session_errors = _Columns(path, TEXT, frame=False)
-                self.layout = self.layout.with_session_log()
-            columns = self.session_errors
-        level = _LEVELS.get(LEVEL_NAMES.get(event.level, "info"), "INFO")
-        columns.add(event.t, None, event.message, level)
+        with self._lock:
+            bus = self.buses.get(event.bus)
+            if bus is not None:
+                columns = bus.errors
+            else:
+                if self.session_errors is None:
+                    path = f"/{ent.SESSION}/{ent.ERRORS}"
+                    self.session_errors = _Columns(path, TEXT, frame=False)
+                    self.layout = self.layout.with_session_log()
+                columns = self.session_errors
+            level = _LEVELS.get(LEVEL_NAMES.get(event.level, "info"), "INFO")
+            columns.add(event.t, None, event.message, level)
 
     def tick(self, now: float) -> None:
-        if self._pending >= self.max_rows or (
-            self._pending and time.monotonic() >= self._next_flush
-        ):
+        with self._lock:
+            self._mid_batch = False  # the batch is complete
+            self._batch_done.notify_all()
+            self._raise_failure()
+            due = self._pending >= self.max_rows or (
+                self._pending and time.monotonic() >= self._next_flush
+            )
+        if due and not self._sending.locked():  # (not while the timer's flush is sending)
             self.flush()
 
     def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
+        self._stop()
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._mid_batch = False
         self.flush(final=True)
         self.output.finish(blueprint(self.layout))
 
     def on_error(self, exc: BaseException) -> None:
-        self._closed = True
+        self._stop()
+        with self._lock:
+            self._closed = True
         try:
             self.output.finish(blueprint(self.layout))
         except Exception:
             pass  # already detached; the session reports the first error
 
+    # -- the timer (live) ------------------------------------------------------------------
+
+    def _run_timer(self) -> None:
+        """The session flushes at its ticks when a flush is due; when a batch keeps it busy a
+        whole interval past the due time, this thread flushes instead, so the viewer is updated
+        however long the session's batches take. (Not sooner: in a process whose threads share
+        one GIL, a flush on this thread runs slower than the same flush at a tick.)"""
+        stop = self._stop_timer
+        late = self.flush_interval  # a whole interval late: the session is in a long batch
+        while not stop.wait(max(self._next_flush + late - time.monotonic(), 0.001)):
+            with self._lock:
+                if self._closed:
+                    return
+                now = time.monotonic()
+                if now < self._next_flush + late:
+                    continue  # flushed at a tick meanwhile
+                if not self._pending:
+                    self._schedule(now)  # nothing new: the next slot of the grid
+                    continue
+            try:
+                self.flush()  # looked up on the instance: a wrapper sees every flush
+            except Exception as exc:  # the session detaches us at its next call
+                self._failure = exc
+                return
+
+    def _stop(self) -> None:
+        self._stop_timer.set()
+        timer = self._timer
+        if timer is not None and timer is not threading.current_thread():
+            timer.join()
+
+    def _raise_failure(self) -> None:
+        if self._failure is not None:
+            failure, self._failure = self._failure, None
+            raise failure
+
     # -- sending ---------------------------------------------------------------------------
 
     def flush(self, final: bool = False) -> None:
-        """Send every buffered column, then the layout if a gripper or bus appeared."""
-        self._schedule(time.monotonic())
-        for g in self.grippers.values():
-            forces = g.by_field["force"].values
-            if forces:
-                g.force = forces[-1]
-            if g.readings():
-                self.layout = self.layout.with_gripper(*g.key)
-            for columns in g.columns():
-                self._send(columns)
+        """Send every buffered column, then the layout if a gripper or bus appeared. What
+        waits is taken under the buffers' lock (on the timer's thread, once the batch whose
+        records came has given its samples); it is turned into Arrow and sent outside it."""
+        with self._sending:
+            with self._lock:
+                if threading.current_thread() is self._timer:
+                    self._batch_done.wait_for(lambda: not self._mid_batch, timeout=1.0)
+                self._schedule(time.monotonic())
+                grippers = [(g, g.take()) for g in self.grippers.values()]
+                columns = [(c, c.take()) for c in self._columns(final) if c.values]
+                self._pending = 0
+            readings = [g.key for g, taken in grippers if self._send_gripper(g, *taken)]
+            for c, rows in columns:
+                self._send_entity(c, *rows)
+            self._batches.send(self.stream)
+            with self._lock:
+                for key in readings:
+                    self.layout = self.layout.with_gripper(*key)
+                if not self._timed and self._untimed:  # no timestamps: the frame timeline only
+                    self.layout = self.layout.with_timeline(ent.FRAME)
+                layout = self.layout
+            mono = time.monotonic()
+            if layout != self._sent_layout and (final or mono >= self._next_layout):
+                # grippers appear in bursts when a session starts: a blueprint a second at most
+                self.output.show(blueprint(layout))
+                self._sent_layout = layout
+                self._next_layout = mono + LAYOUT_EVERY_S
+
+    def _columns(self, final: bool) -> list[_Columns]:
+        """The commands, error logs and health columns (the finished seconds counted)."""
+        out = [g.commands for g in self.grippers.values()]
         for bus in self.buses.values():
             bus.count_seconds(final)
-            for columns in bus.columns():
-                self._send(columns)
+            out += bus.columns()
         if self.session_errors is not None:
-            self._send(self.session_errors)
-        self._batches.send(self.stream)
-        self._pending = 0
-        if not self._timed and self._untimed:  # a capture without timestamps: frames only
-            self.layout = self.layout.with_timeline(ent.FRAME)
-        mono = time.monotonic()
-        if self.layout != self._sent_layout and (final or mono >= self._next_layout):
-            # grippers appear in bursts when a session starts: one blueprint per second at most
-            self.output.show(blueprint(self.layout))
-            self._sent_layout = self.layout
-            self._next_layout = mono + LAYOUT_EVERY_S
+            out.append(self.session_errors)
+        return out
 
     def _schedule(self, now: float) -> None:
         """The next flush is due one interval after the one due now (a fixed cadence: a late
-        tick does not delay the next), or one interval from now after a missed interval. A
+        flush does not delay the next), or one interval from now after a missed interval. A
         flush before its time (too many rows waiting) leaves the cadence as it is."""
         if now < self._next_flush:
             return
         due = self._next_flush + self.flush_interval
         self._next_flush = due if due > now else now + self.flush_interval
 
-    def _send(self, c: _Columns) -> None:
-        """The rows of ``c`` as one chunk (two when only some rows have a timestamp)."""
-        if not c.values:
-            return
-        if c.style is not None:
-            self.stream.log(c.path, c.style, static=True, strict=True)
-            c.style = None
-        t, seq, data, levels = c.take()
-        if c.kind == SCALAR and c.convert is not None:
-            data = c.convert(data)
-        elif c.kind == LANE:
-            data = list(map(str, data))
+    def _send_gripper(
+        self, g: _Gripper, rows: list[_Rows], mark_t: list[float | None], mark_seq: list[int]
+    ) -> bool:
+        """A gripper's columns (a shape's share their rows: one record batch), then its fault
+        marks. Whether readings or settings were sent."""
+        forces: list[tuple[np.ndarray, np.ndarray]] = []  # (seq, force) of the readings sent
+        faults: list[tuple[np.ndarray, np.ndarray]] = []  # (t, seq) of fault readings
+        for field, t, seq, values in rows:
+            if field == "force":
+                forces.append((seq, values))
+            elif field == "fault":
+                bad = np.fromiter(map(bool, values), bool, len(values))
+                if bad.any():
+                    faults.append((t[bad], seq[bad]))
+            self._send_entity(g.by_field[field], t, seq, values, [])
+        self._send_marks(g, mark_t, mark_seq, forces, faults)
+        return bool(rows)
+
+    def _send_marks(
+        self,
+        g: _Gripper,
+        mark_t: list[float | None],
+        mark_seq: list[int],
+        forces: list[tuple[np.ndarray, np.ndarray]],
+        faults: list[tuple[np.ndarray, np.ndarray]],
+    ) -> None:
+        """The red marks: records with errors or fault flags, and fault readings (once per
+        record), each at the force last read at or before it (0 before any)."""
+        force_seq = force = np.zeros(0)
+        if forces:
+            force_seq = np.concatenate([f[0] for f in forces])
+            order = np.argsort(force_seq, kind="stable")
+            force_seq, force = force_seq[order], np.concatenate([f[1] for f in forces])[order]
+        if mark_seq or faults:
+            t = np.concatenate([np.array(mark_t, dtype=np.float64), *(f[0] for f in faults)])
+            seq = np.concatenate([np.array(mark_seq, dtype=np.int64), *(f[1] for f in faults)])
+            seq, first = np.unique(seq, return_index=True)  # a faulty record's reading: once
+            t = t[first]
+            last = np.searchsorted(force_seq, seq, side="right") - 1
+            before = 0.0 if g.force is None else float(g.force)
+            at = force[last.clip(0)] if len(force) else np.zeros(len(seq))
+            self._send_entity(g.marks, t, seq, np.where(last >= 0, at, before), [])
+        if len(force):
+            g.force = force[-1]
+
+    def _send_entity(
+        self, e: _Entity, t: np.ndarray, seq: np.ndarray | None, data: Any, levels: list[str]
+    ) -> None:
+        """Rows of ``e`` as one chunk (two when only some rows have a timestamp)."""
+        if e.style is not None:
+            self.stream.log(e.path, e.style, static=True, strict=True)
+            e.style = None
+        if e.kind == SCALAR and e.convert is not None:
+            data = e.convert(data)
+        elif e.kind == LANE:
+            data = _lane_values(data)
         untimed = np.isnan(t)
         if not untimed.any():
-            self._send_rows(c, t, seq, data, levels)
+            self._send_rows(e, t, seq, data, levels)
             return
         # a capture without timestamps (or a few records without one): frame timeline only
         timed = ~untimed
-        data = np.asarray(data, dtype=None if c.kind == SCALAR else object)
+        data = np.asarray(data, dtype=None if e.kind == SCALAR else object)
         level = np.array(levels, dtype=object)
         if timed.any():
             part = None if seq is None else seq[timed]
-            self._send_rows(c, t[timed], part, data[timed], level[timed] if levels else levels)
+            self._send_rows(e, t[timed], part, data[timed], level[timed] if levels else levels)
         if seq is not None:
             self._send_rows(
-                c, None, seq[untimed], data[untimed], level[untimed] if levels else levels
+                e, None, seq[untimed], data[untimed], level[untimed] if levels else levels
             )
 
     def _send_rows(
         self,
-        c: _Columns,
+        e: _Entity,
         stamps: np.ndarray | None,
         seq: np.ndarray | None,
         data: Any,
@@ -437,16 +645,48 @@ class RerunListener(Listener):
         else:
             self._untimed = True
         descriptors: tuple[Any, ...]
-        if c.kind == SCALAR:
+        if e.kind == SCALAR:
             descriptors, values = SCALARS, [pa.array(data, pa.float64())]
-        elif c.kind == LANE:
+        elif e.kind == LANE:
             descriptors, values = STATE, [pa.array(list(data), pa.utf8())]
         else:
             descriptors = TEXT_LOG
             values = [pa.array(list(data), pa.utf8()), pa.array(list(levels), pa.utf8())]
-        self._batches.add(c.path, stamps, seq, descriptors, values)
+        self._batches.add(e.path, stamps, seq, descriptors, values)
 
     # -- parts -----------------------------------------------------------------------------
+
+    def _new_shape(self, s: StateSample) -> None:
+        """File the first sample of a new shape (or note that it plots nothing)."""
+        key = (s.bus, s.device, *s.changed)
+        fields = tuple(f for f in _PLOTTED if f in s.changed)
+        if not fields:
+            self._shapes[key] = False
+            return
+        g = self.grippers.get((s.bus, s.device)) or self._gripper(s.bus, s.device)
+        shape = self._shapes[key] = _Shape(g, fields)
+        g.shapes.append(shape)
+        try:
+            shape.put(shape.get(s.changed))
+        except TypeError:
+            self._odd(shape, s)
+            return
+        shape.add_t(NAN if s.t is None else s.t)
+        shape.add_seq(s.seq)
+
+    def _odd(self, shape: _Shape, s: StateSample) -> None:
+        """A sample with a value that is not a number: its fields one by one (None: none)."""
+        shape.drop_partial()
+        g = shape.gripper
+        for field in shape.fields:
+            value = s.changed[field]
+            if value is None:
+                continue
+            c = g.odd.get(field)
+            if c is None:
+                e = g.by_field[field]
+                c = g.odd[field] = _Columns(e.path, e.kind)
+            c.add(s.t, s.seq, value)
 
     def _gripper(self, bus: str, device: int) -> _Gripper:
         g = self.grippers[(bus, device)] = _Gripper(bus, device)
@@ -463,12 +703,16 @@ class RerunListener(Listener):
         self.layout = self.layout.with_bus(name)
         return bus
 
-    def _mark(self, g: _Gripper, t: float | None, seq: int) -> None:
-        """A red mark on the force plot, at the force last read (0 before any)."""
-        forces = g.by_field["force"].values
-        force = forces[-1] if forces else g.force
-        g.marks.add(t, seq, 0 if force is None else force)
-        self._marked.add((g.key[0], seq))
+
+def _lane_values(values: Any) -> list[str]:
+    """A lane's values as the viewer's state names: numbers as they are written ("3", not
+    "3.0": a shape's columns hold them as floats)."""
+    if isinstance(values, np.ndarray):
+        whole = values.astype(np.int64)
+        if (whole == values).all():
+            return list(map(str, whole.tolist()))
+        values = values.tolist()
+    return list(map(str, values))
 
 
 def _problem_text(rec: Record) -> str:

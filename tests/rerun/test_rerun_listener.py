@@ -447,3 +447,68 @@ def test_live_on_a_serial_pty(tmp_path: Path) -> None:
     assert opening.values == pytest.approx([opening_mm(p) for p in range(1000, 400, -50)])
     assert all(t is not None for t in opening.capture_time)
     assert Counter(s.bus for s in collector.samples) == Counter({"rs232": 24})
+
+
+# -- the listener's own paths ------------------------------------------------------------------
+
+
+def sample(seq: int, **changed: Any) -> StateSample:
+    return StateSample(1_763_700_000.0 + seq / 10, "can0", 1, "eg2-can", seq, changed, {})
+
+
+def test_a_sample_with_a_value_that_is_not_a_number_is_plotted_field_by_field(
+    tmp_path: Path,
+) -> None:
+    """Samples are filed by the fields they changed; one whose value is None (named without a
+    value) or not a number goes field by field: nothing lost, nothing invented."""
+    listener = RerunListener(str(tmp_path / "odd.rrd"))
+    listener.on_states(
+        [
+            sample(1, force=10, opening=500, state=4),
+            sample(2, force=None, opening=510, state=4),
+            sample(3, force=12, opening=520, state="closing"),
+            sample(4, force=13, opening=530, state=6),
+        ]
+    )
+    listener.close()
+    rrd = read_rrd(tmp_path / "odd.rrd")
+    force = rrd["/can0/1/force/measured"].rows()
+    assert [(frame, value) for _, frame, value in force] == [(1, 10), (3, 12), (4, 13)]
+    opening = rrd["/can0/1/opening_mm/measured"].rows()
+    assert [v for _, _, v in opening] == pytest.approx(
+        [opening_mm(v) for v in (500, 510, 520, 530)]
+    )
+    assert [v for _, _, v in rrd["/can0/1/state"].rows()] == ["4", "4", "closing", "6"]
+    for entity in ("force/measured", "opening_mm/measured", "state"):
+        for t_ns, frame, _ in rrd[f"/can0/1/{entity}"].rows():
+            assert same_time(t_ns, 1_763_700_000.0 + frame / 10)
+
+
+def test_a_live_listener_flushes_on_its_timer_while_the_session_is_busy(tmp_path: Path) -> None:
+    """No tick comes (the session is decoding a long batch): the timer thread flushes; never
+    between a batch's records and its samples."""
+    listener = RerunListener(str(tmp_path / "timer.rrd"), live=True)
+    flushes: list[str] = []
+    flush = listener.flush
+
+    def counted(final: bool = False) -> None:
+        flushes.append(threading.current_thread().name)
+        flush(final)
+
+    listener.flush = counted  # type: ignore[method-assign]
+    listener.on_states([sample(1, force=10)])
+    deadline = time.monotonic() + 5
+    while not flushes and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert flushes == ["rerun-flush"]
+    listener.on_records([])  # a batch's records: its samples come next
+    time.sleep(0.3)
+    assert flushes == ["rerun-flush"]  # due, but the batch is not complete
+    listener.on_states([sample(2, force=11)])
+    deadline = time.monotonic() + 5
+    while len(flushes) < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    listener.close()
+    assert flushes[1] == "rerun-flush"
+    rows = read_rrd(tmp_path / "timer.rrd")["/can0/1/force/measured"].rows()
+    assert [(frame, value) for _, frame, value in rows] == [(1, 10), (2, 11)]
