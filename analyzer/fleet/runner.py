@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import pyarrow.dataset as ds
 
@@ -35,6 +35,11 @@ from .capture_task import (
 from .tables import HASH, PATH
 
 Report = Callable[[CaptureResult], None]
+
+#: Dask settings for the workers of the LocalCluster batch starts: Dask's statistical profiler
+#: walks the running task's stack every 10 ms, which cost the decoding about 8% (measured with
+#: tests/benchmarks/bench_batch.py; the dashboard loses its Profile page)
+WORKER_CONFIG: Final = {"distributed.worker.profile.enabled": False}
 
 
 @dataclass(frozen=True)
@@ -121,6 +126,7 @@ def _result(future: Any, job: CaptureJob) -> CaptureResult:
 
 @contextlib.contextmanager
 def _client(options: DaskOptions) -> Iterator[Any]:
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if options.scheduler is not None:
@@ -128,6 +134,7 @@ def _client(options: DaskOptions) -> Iterator[Any]:
             yield client
         return
     with (
+        dask.config.set(WORKER_CONFIG),  # the worker processes take the config they start with
         LocalCluster(
             n_workers=options.workers,
             threads_per_worker=1,  # the decoders hold the GIL: processes, not threads

@@ -8,7 +8,8 @@ Generates ``--captures`` captures of ``--frames`` frames each (candump logs, raw
 Modbus dumps in turn, realistic moving grippers), then runs the real CLI on the folder, each
 time into a fresh dataset:
 - ``loop``: ``eg2scope batch DIR -o D --workers 1`` (one process, no Dask);
-- ``dask-1``: the same on a one-worker Dask LocalCluster started beforehand (``--scheduler``);
+- ``dask-1``: the same on a one-worker Dask LocalCluster started beforehand (``--scheduler``),
+  with the settings of the cluster ``batch`` starts (``analyzer.fleet.runner.WORKER_CONFIG``);
 - ``dask-2``: ``eg2scope batch DIR -o D --workers 2`` (the CLI's own two-worker LocalCluster,
   its start included).
 Targets (issue 11): two workers at least 1.7 times one; Dask at most 10% slower than the loop.
@@ -90,7 +91,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "bench-out")
     args = parser.parse_args()
 
+    import dask
     from dask.distributed import LocalCluster
+
+    from analyzer.fleet.runner import WORKER_CONFIG
 
     folder = args.out / f"fleet_{args.captures}x{args.frames}"
     print(f"generating {args.captures} captures of {args.frames:,} frames in {folder} ...")
@@ -98,9 +102,12 @@ def main() -> None:
     dataset = args.out / "fleet-dataset"
     times: dict[str, list[float]] = {"loop": [], "dask-1": [], "dask-2": []}
     records = 0
-    with LocalCluster(
-        n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
-    ) as one:
+    with (
+        dask.config.set(WORKER_CONFIG),  # as the LocalCluster `eg2scope batch` starts
+        LocalCluster(
+            n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+        ) as one,
+    ):
         address = one.scheduler_address
         for run in range(args.runs):
             for name, options in (
