@@ -12,7 +12,7 @@ from __future__ import annotations
 import datetime as dt
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
@@ -51,7 +51,6 @@ class CaptureResult:
     errors: int = 0
     message: str = ""
     seconds: float = 0.0
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def decode_capture(job: CaptureJob) -> CaptureResult:
@@ -69,7 +68,7 @@ def _decode(job: CaptureJob) -> CaptureResult:
         stat = path.stat()
     except OSError as exc:
         return CaptureResult(job.path, UNREADABLE, message=_reason(exc))
-    if not job.force and digest in _done(root, digest):
+    if not job.force and layout.is_done(root, digest):
         return CaptureResult(job.path, SKIPPED, digest, message="same content is in the dataset")
     layout.remove_capture(root, digest)  # what an interrupted attempt or an older run left
     try:
@@ -110,11 +109,6 @@ def _decode(job: CaptureJob) -> CaptureResult:
 
 def _options(job: CaptureJob) -> CaptureOptions:
     return CaptureOptions(path=job.path, protocol=job.protocol, progress=False)
-
-
-def _done(root: Path, digest: str) -> set[str]:
-    folder = root / layout.CAPTURES
-    return {digest} if any(folder.glob(f"day=*/{digest}.parquet")) else set()
 
 
 def _reason(exc: BaseException) -> str:

@@ -53,6 +53,11 @@ def done_hashes(root: Path) -> set[str]:
     return {p.stem for p in (root / CAPTURES).glob("day=*/*.parquet")}
 
 
+def is_done(root: Path, content_hash: str) -> bool:
+    """Whether the dataset holds this capture (its ``captures/`` row exists)."""
+    return any((root / CAPTURES).glob(f"day=*/{content_hash}.parquet"))
+
+
 def capture_files(root: Path, content_hash: str) -> list[Path]:
     """Every file of one capture in the dataset, its ``captures/`` row last."""
     name = f"{content_hash}.parquet"
