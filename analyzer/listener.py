@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from typing import Any
 
 from decoders.model import Record
@@ -32,10 +33,10 @@ class Listener(ABC):
     wants_raw: bool = False
 
     @abstractmethod
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         """Decoded records, in stream order."""
 
-    def on_states(self, samples: list[StateSample]) -> None:
+    def on_states(self, samples: Sequence[StateSample]) -> None:
         """State samples (one per record that set a gripper's state), in stream order."""
 
     def on_event(self, event: SourceEvent) -> None:

@@ -63,6 +63,15 @@ class Decoding:
             return self._post(self._replay(key, dec))
         return self._post(dec.feed(payload))
 
+    def feed_items(self, items: list[Item]) -> list[Record]:
+        """The records of a run of items (``feed`` for each, concatenated): the session's call,
+        which the native core's ``LiveCan.feed`` answers for CAN input."""
+        feed = self.feed
+        records: list[Record] = []
+        for item in items:
+            records += feed(item)
+        return records
+
     def feed_can(self, bus: str, frame: CanFrame) -> list[Record]:
         """One CAN frame (``feed`` without the Item, for tight loops over CAN captures)."""
         rec = self._decode_can(bus, frame)

@@ -32,7 +32,7 @@ much; ``close`` writes the summary and index.
 
 **Cost.** At three messages per CAN frame the recorder's work is per message: the file is
 written by ``mcap_writer.McapWriter`` (the mcap library's layout, a batch of messages at a
-time), and every message is a bytes object of its own size (``_message``).
+time), and every message is a bytes object of its own size (``batches.json_message``).
 
 **Reading.** An intact file is read through its index, a damaged one (a recorder killed
 mid-session, a copy cut short) chunk by chunk up to the damage. Every chunk is checked against
@@ -88,6 +88,17 @@ from decoders.model import CanFrame, Record
 from decoders.model import Chunk as ByteChunk
 
 from . import __version__
+from .batches import (
+    can_raw_messages,
+    json_message,
+    record_buses,
+    record_messages,
+    record_times,
+    sample_keys,
+    sample_messages,
+    sample_times,
+    with_problems,
+)
 from .errors import UsageError
 from .lifecycle import Closing
 from .listener import Listener
@@ -297,14 +308,6 @@ def topic_part(bus: str) -> str:
 _dumps = functools.partial(orjson.dumps, default=json_default)
 
 
-def _message(obj: Any) -> bytes:
-    """``obj`` as JSON in a bytes object of its own size. orjson writes into a buffer of a few
-    KiB and shrinks it in place: a batch of its results, held until the next tick, would strand
-    the rest of every buffer, and touching that much fresh memory per message (page faults)
-    costs more than encoding it."""
-    return memoryview(orjson.dumps(obj, default=json_default)).tobytes()
-
-
 def _b64(data: bytes) -> str:
     return binascii.b2a_base64(data, newline=False).decode("ascii")
 
@@ -312,6 +315,24 @@ def _b64(data: bytes) -> str:
 def metadata_strings(metadata: dict[str, Any]) -> dict[str, str]:
     """MCAP metadata values must be strings: JSON-encode anything else."""
     return {str(k): v if isinstance(v, str) else _dumps(v).decode() for k, v in metadata.items()}
+
+
+def _raw_message(item: Item) -> dict[str, Any]:
+    """The ``/raw`` message of one item (schemas CAN_FRAME and RAW_CHUNK)."""
+    p = item.payload
+    if isinstance(p, CanFrame):
+        return {
+            "t": p.t,
+            "id": p.arbitration_id,
+            "extended": p.is_extended,
+            "remote": p.is_remote,
+            "error": p.is_error,
+            "fd": p.is_fd,
+            "dlc": p.length,
+            "data": _b64(p.data),
+            "channel": p.channel,
+        }
+    return {"t": p.t, "stream": item.stream, "direction": p.direction, "data": _b64(p.data)}
 
 
 # -- writing ---------------------------------------------------------------------------------------
@@ -411,61 +432,41 @@ class McapRecorder(Closing, Listener):
         """Raw input, byte chunks and CAN frames, on ``/raw/<bus>``."""
         self._check_open()
         can_channels, byte_channels = self._channels[CAN_FRAME], self._channels[RAW_CHUNK]
-        channels: list[int] = []
-        datas: list[bytes] = []
-        for item in items:
-            p = item.payload
-            if isinstance(p, CanFrame):
-                channels.append(can_channels.get(item.bus) or self._channel(CAN_FRAME, item.bus))
-                msg: dict[str, Any] = {
-                    "t": p.t,
-                    "id": p.arbitration_id,
-                    "extended": p.is_extended,
-                    "remote": p.is_remote,
-                    "error": p.is_error,
-                    "fd": p.is_fd,
-                    "dlc": p.length,
-                    "data": _b64(p.data),
-                    "channel": p.channel,
-                }
-            else:
-                channels.append(byte_channels.get(item.bus) or self._channel(RAW_CHUNK, item.bus))
-                msg = {
-                    "t": p.t,
-                    "stream": item.stream,
-                    "direction": p.direction,
-                    "data": _b64(p.data),
-                }
-            datas.append(_message(msg))
+        channels = [
+            (can_channels.get(item.bus) or self._channel(CAN_FRAME, item.bus))
+            if type(item.payload) is CanFrame
+            else (byte_channels.get(item.bus) or self._channel(RAW_CHUNK, item.bus))
+            for item in items
+        ]
+        datas = can_raw_messages(items)  # CAN frames only: the native core's JSON
+        if datas is None:
+            datas = [json_message(_raw_message(item)) for item in items]
         self._gather([item.payload.t for item in items], channels, datas)
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         """Decoded records on ``/decoded/<bus>``, and those with problems on ``/events/<bus>``
         (if ``log_record_problems``)."""
         self._check_open()
         known = self._channels[RECORD]
         self._gather(
-            [rec.t for rec in records],
-            [known.get(rec.bus) or self._channel(RECORD, rec.bus) for rec in records],
-            [_message(rec.to_dict()) for rec in records],
+            record_times(records),
+            [known.get(bus) or self._channel(RECORD, bus) for bus in record_buses(records)],
+            record_messages(records),
         )
         if self.log_record_problems:
-            problems = [self._problem(rec) for rec in records if rec.errors or rec.warnings]
+            problems = [self._problem(rec) for rec in with_problems(records)]
             if problems:
                 times, channels, datas = zip(*problems, strict=True)
                 self._gather(times, channels, datas)
 
-    def on_states(self, samples: list[StateSample]) -> None:
+    def on_states(self, samples: Sequence[StateSample]) -> None:
         """One message per state sample on ``/state/<bus>/<device>``, at its record's time."""
         self._check_open()
         known = self._channels[DEVICE_STATE]
         self._gather(
-            [s.t for s in samples],
-            [
-                known.get((s.bus, s.device)) or self._channel(DEVICE_STATE, s.bus, s.device)
-                for s in samples
-            ],
-            [_message(s.to_dict()) for s in samples],
+            sample_times(samples),
+            [known.get(key) or self._channel(DEVICE_STATE, *key) for key in sample_keys(samples)],
+            sample_messages(samples),
         )
 
     def on_event(self, event: SourceEvent) -> None:
@@ -480,7 +481,7 @@ class McapRecorder(Closing, Listener):
         """A mark set by a person (the TUI) on ``/marks``: ``seq`` is the record it marks."""
         self._check_open()
         channel = self._channels[MARK].get("") or self._channel(MARK, "")
-        self._gather([t], [channel], [_message({"t": t, "name": name, "seq": seq})])
+        self._gather([t], [channel], [json_message({"t": t, "name": name, "seq": seq})])
 
     def tick(self, now: float = 0.0) -> None:
         """After every batch and when idle: write what was gathered, and end the chunk in
@@ -579,7 +580,7 @@ class McapRecorder(Closing, Listener):
             "count": count,
         }
         ch = self._channels[FOXGLOVE_LOG].get(bus) or self._channel(FOXGLOVE_LOG, bus)
-        return (t, ch, _message(msg))
+        return (t, ch, json_message(msg))
 
     def _channel(self, schema: str, bus: str, device: int | None = None) -> int:
         schema_id = self._schemas.get(schema)

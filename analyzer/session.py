@@ -19,19 +19,18 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
 from decoders.model import Record
 
+from .batches import error_count, session_engine
 from .listener import Listener
 from .model import ERROR, SourceEvent
-from .pipeline import Decoding
 from .sources.live import Tap
 from .sources.source import Batch, LiveSource, Source
-from .tracker import Tracker
 
 # source events after which a bus's held bytes will not be completed
 GAP_EVENTS = frozenset({"lost", "closed"})
@@ -42,12 +41,15 @@ class SessionOptions:
     """How a session decodes. ``protocol``: the byte-stream protocol (None: detected per
     stream); ``per_bus``: fixed protocols of named buses; ``byte_time_s``: seconds per byte of
     named serial buses (10 bits / baud), to time frames inside a read; ``duration``: stop after
-    this many seconds of wall time (None: run until the source ends or Ctrl-C)."""
+    this many seconds of wall time (None: run until the source ends or Ctrl-C); ``engine``:
+    "auto" (the native core for CAN input where it is built), "python" or "native"
+    (analyzer/batches.py)."""
 
     protocol: str | None = None
     per_bus: dict[str, str] = field(default_factory=dict)
     byte_time_s: dict[str, float] = field(default_factory=dict)
     duration: float | None = None
+    engine: str = "auto"
 
 
 @dataclass
@@ -79,13 +81,15 @@ class Session:
         self.source = source
         self.options = options or SessionOptions()
         self.listeners: list[Listener] = list(listeners)
-        self.decoding = Decoding(
-            self.options.protocol,
-            self.options.per_bus,
-            positional_seq=source.positional,
-            byte_time_s=self.options.byte_time_s,
+        opts = self.options
+        self.decoding, self.tracker = session_engine(
+            opts.engine,
+            source.kind,
+            source.positional,
+            opts.protocol,
+            opts.per_bus,
+            opts.byte_time_s,
         )
-        self.tracker = Tracker()
         self.counts = SessionCounts()
         self.detached: list[tuple[Listener, BaseException]] = []
         self._stop = threading.Event()
@@ -133,25 +137,25 @@ class Session:
     # -- one batch ---------------------------------------------------------------------------
 
     def _step(self, batch: Batch, final: bool = False) -> None:
-        items: list[Any] = []
-        records: list[Record] = []
-        feed = self.decoding.feed
+        decoding = self.decoding
+        items: list[Any] = []  # since the last event
         for x in batch:
             if isinstance(x, SourceEvent):
+                records = decoding.feed_items(items)
                 if x.kind in GAP_EVENTS:  # what was held for that bus ends before the gap
-                    records += self.decoding.gap(x.bus)
-                if items or records:  # keep events in order with the data around them
-                    self._emit(items, records)
-                    items, records = [], []
+                    records += decoding.gap(x.bus)
+                # keep events in order with the data around them
+                self._emit(items, records)
+                items = []
                 self._event(x)
             else:
                 items.append(x)
-                records += feed(x)
+        records = decoding.feed_items(items)
         now = time.time()
         if final:
-            records += self.decoding.finish()
+            records += decoding.finish()
         elif self.source.live:
-            records += self.decoding.tick(now)
+            records += decoding.tick(now)
         self._emit(items, records)
         for listener in tuple(self.listeners):  # a detach must not skip the next one
             try:
@@ -159,7 +163,7 @@ class Session:
             except Exception as exc:
                 self._detach(listener, exc)
 
-    def _emit(self, items: list[Any], records: list[Record]) -> None:
+    def _emit(self, items: list[Any], records: Sequence[Record]) -> None:
         counts = self.counts
         if items:
             counts.items += len(items)
@@ -169,7 +173,7 @@ class Session:
         if not records:
             return
         counts.records += len(records)
-        counts.errors += sum(1 for r in records if r.errors)
+        counts.errors += error_count(records)
         samples = self.tracker.update_many(records)
         counts.samples += len(samples)
         for listener in tuple(self.listeners):

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import gc
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -138,6 +138,7 @@ class CaptureOptions:
     errors_only: bool = False
     speed: float | None = None
     progress: bool = True
+    engine: str = "auto"  # the session's: analyzer/batches.py
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> CaptureOptions:
@@ -149,6 +150,7 @@ class CaptureOptions:
             errors_only=args.errors_only,
             speed=args.speed,
             progress=not args.no_progress,
+            engine=getattr(args, "engine", "auto"),
         )
 
     def record_filter(self) -> Callable[[Record], bool] | None:
@@ -192,13 +194,13 @@ class FilteredListener(Listener):
         self.wants_raw = inner.wants_raw
         self.label = getattr(inner, "label", type(inner).__name__)
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         keep = self.keep
         kept = [r for r in records if keep(r)]
         if kept:
             self.inner.on_records(kept)
 
-    def on_states(self, samples: list[Any]) -> None:
+    def on_states(self, samples: Sequence[Any]) -> None:
         self.inner.on_states(samples)
 
     def on_event(self, event: SourceEvent) -> None:
@@ -246,7 +248,7 @@ class ProgressListener(Listener):
         self.task = self.progress.add_task(reader.path.name, total=reader.size or None, records=0)
         self.progress.start()
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         self.records += len(records)
 
     def tick(self, now: float) -> None:
@@ -284,7 +286,7 @@ def run_capture(
         listeners = [FilteredListener(x, keep) for x in listeners]
     if opts.progress and opts.speed is None and sys.stderr.isatty():
         listeners = [*listeners, ProgressListener(reader)]
-    options = SessionOptions(protocol=byte_protocol(opts))
+    options = SessionOptions(protocol=byte_protocol(opts), engine=opts.engine)
     session = Session(CaptureSource(reader, opts.speed), listeners, options)
     with reader, batch_gc():
         session.run()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import IO, Any
 
 from decoders.model import Record
@@ -60,7 +60,7 @@ class StatusLine(Listener):
         self.colour = use_colour(out)
         self._next = 0.0
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         pass  # counted by the session
 
     def on_event(self, event: SourceEvent) -> None:

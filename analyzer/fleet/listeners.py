@@ -3,13 +3,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import pyarrow as pa
 
 from decoders.model import Record
 
+from ..batches import records_jsonl
 from ..listener import Listener
 from ..model import StateSample
-from ..sinks.parquet import ROW_GROUP_ROWS, JsonlTables, records_jsonl
+from ..sinks.parquet import ROW_GROUP_ROWS, JsonlTables
 from . import layout
 from .partitions import PartitionFiles
 from .tables import RECORDS_SCHEMA, STATES_SCHEMA, states_table, with_source
@@ -25,7 +28,7 @@ class RecordPartitions(JsonlTables, Listener):
         self.path = path
         self.label = "fleet records"
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         self.write_jsonl(records_jsonl(records))
 
     def add(self, table: pa.Table, final: bool = False) -> None:
@@ -47,10 +50,10 @@ class StatePartitions(Listener):
         self.held: list[StateSample] = []
         self.label = "fleet states"
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         pass  # the samples are what this one keeps
 
-    def on_states(self, samples: list[StateSample]) -> None:
+    def on_states(self, samples: Sequence[StateSample]) -> None:
         self.held += samples
         if len(self.held) >= ROW_GROUP_ROWS:
             self._flush()

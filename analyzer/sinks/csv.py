@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Sequence
 from typing import IO
 
 import orjson
@@ -45,7 +46,7 @@ class CsvListener(Listener):
         if header:
             self.writer.writerow(COLUMNS)
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         rows = []
         for r in records:
             d = r.to_dict()

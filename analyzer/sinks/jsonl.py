@@ -6,12 +6,14 @@ time order with the frames.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import IO
 
 import orjson
 
 from decoders.model import Record
 
+from ..batches import records_jsonl
 from ..listener import Listener
 from ..model import SourceEvent
 
@@ -21,9 +23,8 @@ class JsonlListener(Listener):
         self.out = out
         self.label = f"JSONL output to {getattr(out, 'name', 'a stream')}"
 
-    def on_records(self, records: list[Record]) -> None:
-        dumps = orjson.dumps
-        self.out.write(b"".join([dumps(r.to_dict()) + b"\n" for r in records]))
+    def on_records(self, records: Sequence[Record]) -> None:
+        self.out.write(records_jsonl(records))
 
     def on_event(self, event: SourceEvent) -> None:
         self.out.write(orjson.dumps(event.to_dict()) + b"\n")

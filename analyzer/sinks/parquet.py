@@ -23,7 +23,7 @@ from __future__ import annotations
 import io
 import re
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from typing import IO, Any, Final
 
@@ -35,6 +35,7 @@ import pyarrow.parquet as pq
 
 from decoders.model import Record
 
+from ..batches import records_jsonl
 from ..listener import Listener
 from ..parquet_schema import (
     FAMILY,
@@ -474,12 +475,6 @@ def write_jsonl_batches(batches: Iterable[bytes], out: str | IO[bytes]) -> int:
     return writer.rows
 
 
-def records_jsonl(records: list[Record]) -> bytes:
-    """Records as the JSONL output writes them."""
-    dumps = orjson.dumps
-    return b"".join([dumps(r.to_dict()) + b"\n" for r in records])
-
-
 class ParquetListener(Listener):
     """The Python engine's Parquet output: its records, as JSONL bytes, to a ParquetRecordWriter."""
 
@@ -487,7 +482,7 @@ class ParquetListener(Listener):
         self.label = f"Parquet output to {getattr(out, 'name', 'a stream')}"
         self.writer = ParquetRecordWriter(out)
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         self.writer.write_jsonl(records_jsonl(records))
 
     def close(self) -> None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import threading
 import time
 from array import array
+from collections.abc import Sequence
 from itertools import groupby
 from operator import attrgetter, itemgetter
 from typing import Any, Final
@@ -346,7 +347,7 @@ class RerunListener(Listener):
 
     # -- what the session gives ------------------------------------------------------------
 
-    def on_states(self, samples: list[StateSample]) -> None:
+    def on_states(self, samples: Sequence[StateSample]) -> None:
         with self._lock:
             self._raise_failure()
             shapes = self._shapes
@@ -368,7 +369,7 @@ class RerunListener(Listener):
             self._mid_batch = False
             self._batch_done.notify_all()
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         with self._lock:
             self._raise_failure()
             self._mid_batch = True  # its samples come next

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from decoders.model import Record
 
 from ..listener import Listener
@@ -14,7 +16,7 @@ class StatsListener(Listener):
         self.stats = CaptureStats()
         self.label = "statistics"
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         add = self.stats.add
         for rec in records:
             add(rec)

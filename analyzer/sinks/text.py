@@ -8,6 +8,7 @@ between times estimated from the line's baud rate is shown as ``~0.41 ms``.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import IO
 
 from decoders.flags import ESTIMATED_TIME
@@ -92,7 +93,7 @@ class TextListener(Listener):
         self.formatter = TextFormatter(colour=colour, absolute_time=absolute_time, t0=t0)
         self.label = f"text output to {getattr(out, 'name', 'a stream')}"
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         fmt = self.formatter.format
         self.out.write("".join([fmt(r) + "\n" for r in records]))
 

@@ -37,6 +37,8 @@ class Source:
     positional = False
     #: items lost because the session fell behind (live only)
     dropped = 0
+    #: what the items are: "can" (CAN frames only), "bytes" (byte chunks only) or "mixed"
+    kind = "mixed"
 
     def start(self) -> None:
         pass
@@ -60,6 +62,8 @@ class LiveSource(Source):
 
     def __init__(self, taps: list[Tap], queue_size: int = 200_000) -> None:
         self.taps = taps
+        kinds = {_tap_kind(tap) for tap in taps}
+        self.kind = kinds.pop() if len(kinds) == 1 else "mixed"
         self.queue = TapQueue(queue_size)
         self.dropped = 0
         self.on_started: Callable[[], None] | None = None  # runs once the taps listen
@@ -118,6 +122,12 @@ class LiveSource(Source):
         )
 
 
+def _tap_kind(tap: Tap) -> str:
+    """What a tap's items are, from its settings' ``kind`` (a tap that does not say: "mixed")."""
+    kind = str(tap.settings.get("kind", ""))
+    return "can" if kind == "can" else "bytes" if kind.startswith("serial") else "mixed"
+
+
 class CaptureSource(Source):
     """A capture file, read on the session's thread; ``speed`` paces it to its own timing
     (1 = real time, 10 = ten times faster, None = as fast as possible)."""
@@ -126,6 +136,7 @@ class CaptureSource(Source):
         self.reader = reader
         self.speed = speed
         self.positional = reader.single_stream
+        self.kind = reader.kind
 
     @property
     def errors(self) -> list[str]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from bisect import bisect_left
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any, Final
@@ -94,7 +95,7 @@ class Aggregates:
         self._dirty_command: set[str] = set()
         self._dirty_device: set[DeviceKey] = set()
 
-    def add(self, records: list[Record], first_index: int) -> None:
+    def add(self, records: Sequence[Record], first_index: int) -> None:
         for k, rec in enumerate(records):
             if rec.flags:
                 self._problems(rec, first_index + k)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Final, Protocol
 
 from decoders import flags as F
@@ -89,7 +89,7 @@ class TuiFeed(Listener):
 
     # -- the listener (the session's thread) -------------------------------------------------
 
-    def on_records(self, records: list[Record]) -> None:
+    def on_records(self, records: Sequence[Record]) -> None:
         first = self.store.count
         self.store.append(records)
         self.aggregates.add(records, first)
@@ -103,7 +103,7 @@ class TuiFeed(Listener):
                         self.trigger = None  # one shot: the user re-arms
                     break
 
-    def on_states(self, samples: list[StateSample]) -> None:
+    def on_states(self, samples: Sequence[StateSample]) -> None:
         changed = self._changed
         for s in samples:
             for name in s.changed:

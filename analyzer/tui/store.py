@@ -147,7 +147,7 @@ class RecordStore:
 
     # -- writing (one thread) --------------------------------------------------------------
 
-    def append(self, records: list[Record]) -> None:
+    def append(self, records: Sequence[Record]) -> None:
         """Add a batch of records (in stream order). One comprehension per column: a Python
         loop with a dozen appends per record costs three times as much."""
         if not records:

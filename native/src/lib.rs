@@ -14,6 +14,7 @@ pub mod framing;
 pub mod hash;
 pub mod json;
 pub mod lint;
+pub mod live;
 pub mod modbus;
 pub mod model;
 pub mod pairing;
@@ -22,6 +23,7 @@ pub mod pyfloat;
 pub mod rawfile;
 pub mod registers;
 pub mod serial;
+pub mod tracker;
 pub mod writers;
 
 #[cfg(feature = "python")]

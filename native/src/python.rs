@@ -23,6 +23,10 @@ use std::path::PathBuf;
 
 #[path = "python_arrow.rs"]
 mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output (helper N)
+#[path = "python_live.rs"]
+mod python_live; // LiveCan, RecordBatch, can_raw_messages: the live CAN path (helper L)
+#[path = "python_tracker.rs"]
+mod python_tracker; // Tracker, SampleBatch: the live state tracker (helper K)
 
 create_exception!(
     analyzer._native,
@@ -386,6 +390,8 @@ impl PyDecodeRun {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyDecodeRun>()?;
     python_arrow::register(m)?;
+    python_live::register(m)?;
+    python_tracker::register(m)?;
     m.add("Unsupported", m.py().get_type::<Unsupported>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("FORMATS", ("jsonl", "csv", "text"))?;
