@@ -27,7 +27,7 @@ import time
 from array import array
 from collections.abc import Sequence
 from itertools import groupby
-from operator import attrgetter, itemgetter
+from operator import itemgetter
 from typing import Any, Final
 
 import numpy as np
@@ -40,6 +40,7 @@ from decoders.modbus_pdu import READ_HOLDING
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
 
 from .. import rerun_entities as ent
+from ..batches import column, problem_indexes
 from ..listener import Listener
 from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
 from ..rerun_blueprint import Layout, blueprint
@@ -71,10 +72,20 @@ _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": 
 # the state fields plotted, in the order their entities are sent
 _PLOTTED: Final = (*(s.field for s in ent.SERIES), *ent.LANES)
 
-_BUS = attrgetter("bus")
-_T = attrgetter("t")
-_SEQ = attrgetter("seq")
-_LATENCY = attrgetter("latency_ms")
+# what on_states reads of each sample
+_SAMPLE_COLUMNS: Final = ("bus", "device", "changed", "t", "seq")
+
+
+def _shown(records: Sequence[Record]) -> list[int]:
+    """The indexes of the records the logs show: those with problems, and the controller's
+    commands (requests that are not polls)."""
+    shown = problem_indexes(records)
+    directions = column(records, "direction")
+    asks = [i for i, d in enumerate(directions) if d == REQUEST]
+    if asks:
+        protocols, codes = column(records, "protocol"), column(records, "code")
+        shown += [i for i in asks if (protocols[i], codes[i]) not in _POLLS]
+    return shown
 
 
 class _Entity:
@@ -348,56 +359,53 @@ class RerunListener(Listener):
     # -- what the session gives ------------------------------------------------------------
 
     def on_states(self, samples: Sequence[StateSample]) -> None:
+        """File each sample under its shape (a column at a time: a native batch makes no
+        samples)."""
         with self._lock:
             self._raise_failure()
             shapes = self._shapes
-            for s in samples:
-                changed = s.changed
-                shape = shapes.get((s.bus, s.device, *changed))
+            rows = zip(*(column(samples, n) for n in _SAMPLE_COLUMNS), strict=True)
+            for bus, device, changed, t, seq in rows:
+                shape = shapes.get((bus, device, *changed))
                 if shape:
                     try:
                         shape.put(shape.get(changed))  # type: ignore[union-attr]
                     except TypeError:  # None, or not a number
-                        self._odd(shape, s)  # type: ignore[arg-type]
+                        self._odd(shape, t, seq, changed)  # type: ignore[arg-type]
                         continue
-                    t = s.t
                     shape.add_t(NAN if t is None else t)  # type: ignore[union-attr]
-                    shape.add_seq(s.seq)  # type: ignore[union-attr]
+                    shape.add_seq(seq)  # type: ignore[union-attr]
                 elif shape is None:
-                    self._new_shape(s)
+                    self._new_shape(bus, device, changed, t, seq)
             self._pending += len(samples)
             self._mid_batch = False
             self._batch_done.notify_all()
 
     def on_records(self, records: Sequence[Record]) -> None:
+        """Times per bus for the health rates, latencies, and the few records the logs show
+        (problems, commands), made into objects only those (a column at a time otherwise)."""
         with self._lock:
             self._raise_failure()
             self._mid_batch = True  # its samples come next
-            buses = self.buses
-            for name, group in groupby(records, _BUS):
-                recs = list(group)
-                bus = buses.get(name) or self._bus(name)
-                times = list(map(_T, recs))
-                if None in times:
-                    times = [t for t in times if t is not None]
-                bus.times.fromlist(times)
-                for rec in [
-                    r
-                    for r in recs
-                    if r.errors
-                    or r.warnings
-                    or (r.direction == REQUEST and (r.protocol, r.code) not in _POLLS)
-                ]:
+            buses, times = column(records, "bus"), column(records, "t")
+            latencies, seqs = column(records, "latency_ms"), column(records, "seq")
+            shown = set(_shown(records))
+            for name, group in groupby(range(len(buses)), buses.__getitem__):
+                run = list(group)
+                bus = self.buses.get(name) or self._bus(name)
+                bus.times.fromlist([t for t in map(times.__getitem__, run) if t is not None])
+                for i in (i for i in run if i in shown):
+                    rec = records[i]
                     if rec.errors or rec.warnings:
                         self._problem(bus, rec)
                     else:
                         self._command(rec, "INFO")
-                timed = [r for r in recs if r.latency_ms is not None and r.t is not None]
+                timed = [i for i in run if latencies[i] is not None and times[i] is not None]
                 if timed:  # a latency needs both times: never NaN
                     latency = bus.latency
-                    latency.t.fromlist(list(map(_T, timed)))
-                    latency.seq.fromlist(list(map(_SEQ, timed)))  # type: ignore[union-attr]
-                    latency.values.fromlist(list(map(_LATENCY, timed)))
+                    latency.t.fromlist([times[i] for i in timed])
+                    latency.seq.fromlist([seqs[i] for i in timed])  # type: ignore[union-attr]
+                    latency.values.fromlist([latencies[i] for i in timed])
             self._pending += len(records)
 
     def _problem(self, bus: _Bus, rec: Record) -> None:
@@ -657,37 +665,39 @@ class RerunListener(Listener):
 
     # -- parts -----------------------------------------------------------------------------
 
-    def _new_shape(self, s: StateSample) -> None:
+    def _new_shape(
+        self, bus: str, device: int, changed: dict[str, Any], t: float | None, seq: int
+    ) -> None:
         """File the first sample of a new shape (or note that it plots nothing)."""
-        key = (s.bus, s.device, *s.changed)
-        fields = tuple(f for f in _PLOTTED if f in s.changed)
+        key = (bus, device, *changed)
+        fields = tuple(f for f in _PLOTTED if f in changed)
         if not fields:
             self._shapes[key] = False
             return
-        g = self.grippers.get((s.bus, s.device)) or self._gripper(s.bus, s.device)
+        g = self.grippers.get((bus, device)) or self._gripper(bus, device)
         shape = self._shapes[key] = _Shape(g, fields)
         g.shapes.append(shape)
         try:
-            shape.put(shape.get(s.changed))
+            shape.put(shape.get(changed))
         except TypeError:
-            self._odd(shape, s)
+            self._odd(shape, t, seq, changed)
             return
-        shape.add_t(NAN if s.t is None else s.t)
-        shape.add_seq(s.seq)
+        shape.add_t(NAN if t is None else t)
+        shape.add_seq(seq)
 
-    def _odd(self, shape: _Shape, s: StateSample) -> None:
+    def _odd(self, shape: _Shape, t: float | None, seq: int, changed: dict[str, Any]) -> None:
         """A sample with a value that is not a number: its fields one by one (None: none)."""
         shape.drop_partial()
         g = shape.gripper
         for field in shape.fields:
-            value = s.changed[field]
+            value = changed[field]
             if value is None:
                 continue
             c = g.odd.get(field)
             if c is None:
                 e = g.by_field[field]
                 c = g.odd[field] = _Columns(e.path, e.kind)
-            c.add(s.t, s.seq, value)
+            c.add(t, seq, value)
 
     def _gripper(self, bus: str, device: int) -> _Gripper:
         g = self.grippers[(bus, device)] = _Gripper(bus, device)

@@ -15,6 +15,8 @@ from typing import Any, Final
 from decoders import flags as F
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
+from ..batches import column
+
 LATENCY_KEEP: Final = 2000  # latencies kept per key for percentiles (the latest)
 HISTOGRAM_BINS: Final = 8
 NOT_PROBLEMS: Final = frozenset({F.FOREIGN, F.ESTIMATED_TIME})  # notes, not problems
@@ -96,29 +98,41 @@ class Aggregates:
         self._dirty_device: set[DeviceKey] = set()
 
     def add(self, records: Sequence[Record], first_index: int) -> None:
-        for k, rec in enumerate(records):
-            if rec.flags:
-                self._problems(rec, first_index + k)
-            if rec.kind != FRAME or rec.device is None or rec.errors:
+        """Fold a batch in, a column at a time (``batches.column``: a native batch makes no
+        records); ``first_index``: the store index of its first record."""
+        names = ("flags", "kind", "device", "errors", "bus", "latency_ms", "direction", "name")
+        rows = zip(*(column(records, n) for n in names), strict=True)
+        frames = []  # (index in the batch, bus, device) of the valid frames of a gripper
+        for k, (flags, kind, device, errors, bus, latency, direction, name) in enumerate(rows):
+            if flags:
+                self._problems(flags, bool(errors), bus, device, first_index + k)
+            if kind != FRAME or device is None or errors:
                 continue
-            key = (rec.bus, rec.device)
-            if rec.latency_ms is not None and rec.direction == RESPONSE:
-                name = rec.name or "?"
-                self._latency(self.latency_command, name, rec.latency_ms)
-                self._latency(self.latency_device, key, rec.latency_ms)
+            key = (bus, device)
+            frames.append((k, key))
+            if latency is not None and direction == RESPONSE:
+                name = name or "?"
+                self._latency(self.latency_command, name, latency)
+                self._latency(self.latency_device, key, latency)
                 self._dirty_command.add(name)
                 self._dirty_device.add(key)
-            self._registers(rec, key)
+        if frames:
+            fields, directions = column(records, "fields"), column(records, "direction")
+            protocols, times = column(records, "protocol"), column(records, "t")
+            for k, key in frames:
+                self._registers(fields[k], directions[k], protocols[k], times[k], key)
 
-    def _problems(self, rec: Record, index: int) -> None:
-        level = "error" if rec.errors else "warning"
-        for code in rec.flags:
+    def _problems(
+        self, flags: list[str], errors: bool, bus: str, device: int | None, index: int
+    ) -> None:
+        level = "error" if errors else "warning"
+        for code in flags:
             if code in NOT_PROBLEMS:
                 continue
-            k = (code, rec.bus, rec.device)
+            k = (code, bus, device)
             group = self.problems.get(k)
             if group is None:
-                self.problems[k] = ProblemGroup(code, rec.bus, rec.device, 1, index, level)
+                self.problems[k] = ProblemGroup(code, bus, device, 1, index, level)
             else:
                 group.count += 1
 
@@ -129,15 +143,21 @@ class Aggregates:
             values = table[key] = deque(maxlen=LATENCY_KEEP)
         values.append(value)
 
-    def _registers(self, rec: Record, key: DeviceKey) -> None:
-        f = rec.fields
+    def _registers(
+        self,
+        f: dict[str, Any],
+        direction: str | None,
+        protocol: str,
+        t: float | None,
+        key: DeviceKey,
+    ) -> None:
         seen: dict[str, Any] = {}
         values = f.get("values")
         if isinstance(values, dict):
             seen.update(values)
-        elif rec.direction == REQUEST and isinstance(f.get("name"), str) and "value" in f:
+        elif direction == REQUEST and isinstance(f.get("name"), str) and "value" in f:
             seen[f["name"]] = f["value"]
-        elif rec.protocol == "eg2-serial" and rec.direction == RESPONSE:
+        elif protocol == "eg2-serial" and direction == RESPONSE:
             seen.update(
                 (k, v)
                 for k, v in f.items()
@@ -149,13 +169,13 @@ class Aggregates:
         for name, value in seen.items():
             reg = table.get(name)
             if reg is None:
-                table[name] = RegisterSeen(value, None, 1, rec.t, rec.t)
+                table[name] = RegisterSeen(value, None, 1, t, t)
                 continue
             if value != reg.value:
                 reg.previous, reg.value = reg.value, value
                 reg.changes += 1
             reg.count += 1
-            reg.last_t = rec.t if rec.t is not None else reg.last_t
+            reg.last_t = t if t is not None else reg.last_t
 
     def snapshot(self) -> Snapshot:
         snap = Snapshot(

@@ -28,6 +28,7 @@ import orjson
 
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
+from ..batches import column
 from ..model import json_default
 
 BLOCK: Final = 256  # records per compressed block
@@ -148,11 +149,12 @@ class RecordStore:
     # -- writing (one thread) --------------------------------------------------------------
 
     def append(self, records: Sequence[Record]) -> None:
-        """Add a batch of records (in stream order). One comprehension per column: a Python
-        loop with a dozen appends per record costs three times as much."""
+        """Add a batch of records (in stream order), a column at a time (``batches.column``:
+        from a native batch without making the records; a Python loop with a dozen appends
+        per record costs three times as much)."""
         if not records:
             return
-        times = [r.t for r in records]
+        times = column(records, "t")
         known: list[float] = [t for t in times if t is not None]
         if known:
             if self.t0 is None:
@@ -161,49 +163,49 @@ class RecordStore:
             if self.t_last is None or top > self.t_last:
                 self.t_last = top
         self.t.extend(_filled(times, NAN))
-        seqs = [r.seq for r in records]
+        seqs = column(records, "seq")
         if self._seq_sorted and ((self.seq and seqs[0] < self.seq[-1]) or seqs != sorted(seqs)):
             self._seq_sorted = False
         self.seq.extend(seqs)
-        self.bus.extend(self.buses.ids_of([r.bus for r in records]))
-        self.device.extend(_filled([r.device for r in records], NONE_DEVICE))
+        self.bus.extend(self.buses.ids_of(column(records, "bus")))
+        self.device.extend(_filled(column(records, "device"), NONE_DEVICE))
         directions = DIRECTIONS
-        self.direction.extend([directions.get(r.direction, 0) for r in records])
-        self.name.extend(
-            self.names.ids_of(
-                [r.name or (r.protocol if r.kind == FRAME else r.kind) for r in records]
-            )
-        )
-        self.protocol.extend(self.protocols.ids_of([r.protocol for r in records]))
-        self.kind.extend(self.kinds.ids_of([r.kind for r in records]))
+        self.direction.extend([directions.get(d, 0) for d in column(records, "direction")])
+        protocols, kinds = column(records, "protocol"), column(records, "kind")
+        names = [
+            n or (p if k == FRAME else k)
+            for n, p, k in zip(column(records, "name"), protocols, kinds, strict=True)
+        ]
+        self.name.extend(self.names.ids_of(names))
+        self.protocol.extend(self.protocols.ids_of(protocols))
+        self.kind.extend(self.kinds.ids_of(kinds))
         mask = self.flag_bits.mask
-        self.flags.extend([mask(r.flags) if r.flags else 0 for r in records])
+        flags = column(records, "flags")
+        self.flags.extend([mask(f) if f else 0 for f in flags])
+        errors, warnings = column(records, "errors"), column(records, "warnings")
         self.severity.extend(
-            [ERROR if r.errors else WARNING if r.warnings else OK for r in records]
+            [ERROR if e else WARNING if w else OK for e, w in zip(errors, warnings, strict=True)]
         )
-        self.latency.extend(_filled([r.latency_ms for r in records], NAN))
-        self.pair.extend(_filled([r.pair for r in records], NONE_SEQ))
+        self.latency.extend(_filled(column(records, "latency_ms"), NAN))
+        self.pair.extend(_filled(column(records, "pair"), NONE_SEQ))
         summaries = self._summaries
         if len(summaries) >= SUMMARY_INTERN_LIMIT:
             summaries.clear()
         intern = summaries.setdefault
-        self.summary.extend([intern(r.summary, r.summary) for r in records])
-        self._add_details(
-            [
-                (
-                    r.fields,
-                    r.errors,
-                    r.warnings,
-                    r.flags,
-                    r.raw.hex(),
-                    r.code,
-                    r.offset,
-                    r.index,
-                    r.length,
-                )
-                for r in records
-            ]
+        self.summary.extend([intern(x, x) for x in column(records, "summary")])
+        details = zip(
+            column(records, "fields"),
+            errors,
+            warnings,
+            flags,
+            [raw.hex() for raw in column(records, "raw")],
+            column(records, "code"),
+            column(records, "offset"),
+            column(records, "index"),
+            column(records, "length"),
+            strict=True,
         )
+        self._add_details(list(details))
         self.count = len(self.seq)
 
     def _add_details(self, details: list[tuple[Any, ...]]) -> None:
