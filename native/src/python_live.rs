@@ -5,10 +5,11 @@
 //!
 //! The decoding itself is live.rs; here Items are read and records handed back. A batch keeps
 //! its Rust records: a Python `Record` is made for an index only when asked for (then kept,
-//! so `batch[i] is batch[i]`), and the bulk methods (`messages`, `times`, ...) read the Rust
-//! records directly, so a recorder that only writes JSON never makes one object per frame.
-//! Both are checked against the Python classes by tests/native/test_live_native.py
-//! (materialized records `==` the Python's, JSON byte-identical).
+//! so `batch[i] is batch[i]`), and the bulk methods (`messages`, `times`, `column`, ...) read
+//! the Rust records directly, so a recorder that only writes JSON never makes one object per
+//! frame. Both are checked against the Python classes by tests/native/test_live_native.py
+//! (materialized records `==` the Python's, JSON byte-identical) and test_batch_columns.py
+//! (every column identical, types included, to the materialized records' attributes).
 //!
 //! Inputs are read strictly: a frame's `t` must be a float or None, its flags bools, its
 //! identifier and DLC non-negative ints that fit (u32, usize). The Python decoders accept more
@@ -21,7 +22,7 @@ use crate::hash::FastMap;
 use crate::live::LiveCan as Core;
 use crate::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
 use crate::writers::{JsonlWriter, RecordWriter};
-use pyo3::exceptions::{PyIndexError, PyTypeError};
+use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError};
 use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
@@ -157,49 +158,150 @@ impl PyParts {
     /// errors, warnings and flags lists its own, as the Python decoders copy them per record).
     fn record<'py>(&mut self, py: Python<'py>, rec: &Record) -> PyResult<Bound<'py, PyAny>> {
         let cls = RECORD.import(py, "decoders.model", "Record")?;
+        // ATTRS's order, spelled out: each `attr` call is then inlined for its attribute
+        let mut attr = |a| self.attr(py, rec, a);
+        let args: [Bound<'py, PyAny>; ATTRS.len()] = [
+            attr(Attr::T)?,
+            attr(Attr::Bus)?,
+            attr(Attr::Protocol)?,
+            attr(Attr::Kind)?,
+            attr(Attr::Length)?,
+            attr(Attr::Raw)?,
+            attr(Attr::Offset)?,
+            attr(Attr::Index)?,
+            attr(Attr::Direction)?,
+            attr(Attr::Device)?,
+            attr(Attr::Code)?,
+            attr(Attr::Name)?,
+            attr(Attr::Fields)?,
+            attr(Attr::Errors)?,
+            attr(Attr::Warnings)?,
+            attr(Attr::Summary)?,
+            attr(Attr::Seq)?,
+            attr(Attr::Pair)?,
+            attr(Attr::LatencyMs)?,
+            attr(Attr::PairKey)?,
+            attr(Attr::ExpectsResponse)?,
+            attr(Attr::IsSave)?,
+            attr(Attr::Flags)?,
+        ];
+        cls.call1(PyTuple::new(py, args)?)
+    }
+
+    /// One attribute of `rec` as its Python Record has it: what materialization passes the
+    /// class, and what `RecordBatch.column` lists (one definition, so the two cannot differ).
+    fn attr<'py>(
+        &mut self,
+        py: Python<'py>,
+        rec: &Record,
+        attr: Attr,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let none = || py.None().into_bound(py);
-        let flags = PyList::empty(py);
-        for f in &rec.flags {
-            flags.append(self.static_str(py, f))?;
-        }
-        let args: [Bound<'py, PyAny>; 23] = [
-            opt_float(py, rec.t),
-            self.text(py, &rec.bus).into_any(),
-            self.static_str(py, rec.protocol).into_any(),
-            self.static_str(py, rec.kind).into_any(),
-            rec.length.into_pyobject(py)?.into_any(),
-            PyBytes::new(py, &rec.raw).into_any(),
-            match rec.offset {
+        Ok(match attr {
+            Attr::T => opt_float(py, rec.t),
+            Attr::Bus => self.text(py, &rec.bus).into_any(),
+            Attr::Protocol => self.static_str(py, rec.protocol).into_any(),
+            Attr::Kind => self.static_str(py, rec.kind).into_any(),
+            Attr::Length => rec.length.into_pyobject(py)?.into_any(),
+            Attr::Raw => PyBytes::new(py, &rec.raw).into_any(),
+            Attr::Offset => match rec.offset {
                 Some(o) => o.into_pyobject(py)?.into_any(),
                 None => none(),
             },
-            match rec.index {
+            Attr::Index => match rec.index {
                 Some(i) => i.into_pyobject(py)?.into_any(),
                 None => none(),
             },
-            match rec.direction {
+            Attr::Direction => match rec.direction {
                 Some(d) => self.static_str(py, d).into_any(),
                 None => none(),
             },
-            opt_int(py, rec.device)?,
-            opt_int(py, rec.code)?,
-            match &rec.name {
+            Attr::Device => opt_int(py, rec.device)?,
+            Attr::Code => opt_int(py, rec.code)?,
+            Attr::Name => match &rec.name {
                 Some(n) => self.cow(py, n).into_any(),
                 None => none(),
             },
-            self.fields(py, &rec.fields)?.into_any(),
-            str_list(py, &rec.errors)?.into_any(),
-            str_list(py, &rec.warnings)?.into_any(),
-            self.text(py, &rec.summary).into_any(),
-            rec.seq.into_pyobject(py)?.into_any(),
-            opt_int(py, rec.pair)?,
-            opt_float(py, rec.latency_ms),
-            pair_key(py, rec)?,
-            PyBool::new(py, rec.expects_response).to_owned().into_any(),
-            PyBool::new(py, rec.is_save).to_owned().into_any(),
-            flags.into_any(),
-        ];
-        cls.call1(PyTuple::new(py, args)?)
+            Attr::Fields => self.fields(py, &rec.fields)?.into_any(),
+            Attr::Errors => str_list(py, &rec.errors)?.into_any(),
+            Attr::Warnings => str_list(py, &rec.warnings)?.into_any(),
+            Attr::Summary => self.text(py, &rec.summary).into_any(),
+            Attr::Seq => rec.seq.into_pyobject(py)?.into_any(),
+            Attr::Pair => opt_int(py, rec.pair)?,
+            Attr::LatencyMs => opt_float(py, rec.latency_ms),
+            Attr::PairKey => pair_key(py, rec)?,
+            Attr::ExpectsResponse => PyBool::new(py, rec.expects_response).to_owned().into_any(),
+            Attr::IsSave => PyBool::new(py, rec.is_save).to_owned().into_any(),
+            Attr::Flags => {
+                let flags = PyList::empty(py);
+                for f in &rec.flags {
+                    flags.append(self.static_str(py, f))?;
+                }
+                flags.into_any()
+            }
+        })
+    }
+}
+
+/// An attribute of decoders.model.Record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Attr {
+    T,
+    Bus,
+    Protocol,
+    Kind,
+    Length,
+    Raw,
+    Offset,
+    Index,
+    Direction,
+    Device,
+    Code,
+    Name,
+    Fields,
+    Errors,
+    Warnings,
+    Summary,
+    Seq,
+    Pair,
+    LatencyMs,
+    PairKey,
+    ExpectsResponse,
+    IsSave,
+    Flags,
+}
+
+/// Record's attributes with their names, in the order of its dataclass fields (the order the
+/// class takes them positionally).
+const ATTRS: [(Attr, &str); 23] = [
+    (Attr::T, "t"),
+    (Attr::Bus, "bus"),
+    (Attr::Protocol, "protocol"),
+    (Attr::Kind, "kind"),
+    (Attr::Length, "length"),
+    (Attr::Raw, "raw"),
+    (Attr::Offset, "offset"),
+    (Attr::Index, "index"),
+    (Attr::Direction, "direction"),
+    (Attr::Device, "device"),
+    (Attr::Code, "code"),
+    (Attr::Name, "name"),
+    (Attr::Fields, "fields"),
+    (Attr::Errors, "errors"),
+    (Attr::Warnings, "warnings"),
+    (Attr::Summary, "summary"),
+    (Attr::Seq, "seq"),
+    (Attr::Pair, "pair"),
+    (Attr::LatencyMs, "latency_ms"),
+    (Attr::PairKey, "pair_key"),
+    (Attr::ExpectsResponse, "expects_response"),
+    (Attr::IsSave, "is_save"),
+    (Attr::Flags, "flags"),
+];
+
+impl Attr {
+    fn named(name: &str) -> Option<Attr> {
+        ATTRS.iter().find(|(_, n)| *n == name).map(|&(a, _)| a)
     }
 }
 
@@ -435,6 +537,26 @@ impl RecordBatch {
             .filter(|(_, r)| !r.errors.is_empty() || !r.warnings.is_empty())
             .map(|(i, _)| i)
             .collect()
+    }
+
+    /// `[getattr(rec, name) for rec in batch]`, read from the records (no Record is made):
+    /// the values the materialized records would have, of the same types, strings and
+    /// `fields` dicts shared as materialization shares them (the `fields` of a memoised decode
+    /// is the very dict its materialized records hold). AttributeError for a name that is not
+    /// one of Record's attributes (the property `ok` is not one).
+    fn column<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyList>> {
+        let Some(attr) = Attr::named(name) else {
+            return Err(PyAttributeError::new_err(format!(
+                "'Record' object has no attribute '{name}'"
+            )));
+        };
+        let values = PyParts::with(|parts| {
+            self.records
+                .iter()
+                .map(|rec| parts.attr(py, rec, attr))
+                .collect::<PyResult<Vec<_>>>()
+        })?;
+        PyList::new(py, values)
     }
 }
 

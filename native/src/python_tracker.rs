@@ -5,19 +5,22 @@
 //! A `SampleBatch` is a sequence of `analyzer.model.StateSample`, each built only when indexed
 //! or iterated (and then the same object every time), with bulk methods that need no Python
 //! object per sample: `messages()` (each sample's JSON, byte-identical to
-//! `orjson.dumps(sample.to_dict(), default=json_default)`), `times()`, `keys()`. `Tracker.states`
-//! builds fresh `analyzer.tracker.DeviceState` objects equal to the Python tracker's.
+//! `orjson.dumps(sample.to_dict(), default=json_default)`), `times()`, `keys()`, `column(name)`
+//! (any attribute, as `[getattr(s, name) for s in batch]`; tests/native/test_batch_columns.py).
+//! `Tracker.states` builds fresh `analyzer.tracker.DeviceState` objects equal to the Python
+//! tracker's.
 //!
 //! A child module of python.rs.
 
 use super::python_live::RecordBatch;
 use crate::flags::UNANSWERED;
+use crate::hash::FastMap;
 use crate::model::{
     Fields, Record, Str, Value, EG2_CAN, EG2_SERIAL, FOREIGN_CAN, FRAME, GARBAGE, MODBUS_RTU,
     REQUEST, RESPONSE, TRUNCATED,
 };
 use crate::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
-use pyo3::exceptions::{PyIndexError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError, PyValueError};
 use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
@@ -331,22 +334,146 @@ impl SampleBatch {
 
     /// `(sample.bus, sample.device)` per sample.
     fn keys<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        // one str object per bus name (a batch has a few buses)
-        let mut buses: Vec<(Arc<str>, Bound<'py, PyString>)> = Vec::new();
+        let mut buses = BusNames::default();
         let mut out = Vec::with_capacity(self.samples.len());
         for s in &self.samples {
-            let bus = match buses.iter().find(|(b, _)| Arc::ptr_eq(b, &s.bus)) {
-                Some((_, obj)) => obj.clone(),
-                None => {
-                    let obj = PyString::new(py, &s.bus);
-                    buses.push((s.bus.clone(), obj.clone()));
-                    obj
-                }
-            };
+            let bus = buses.get(py, &s.bus);
             let device = s.device.into_pyobject(py)?.into_any();
             out.push(PyTuple::new(py, [bus.into_any(), device])?);
         }
         PyList::new(py, out)
+    }
+
+    /// `[getattr(sample, name) for sample in batch]`, read from the samples (no StateSample
+    /// is made): the values the materialized samples would have, `changed` and `values` as new
+    /// dicts with their keys in the same order. AttributeError for a name that is not one of
+    /// StateSample's attributes.
+    fn column<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyList>> {
+        let samples = &self.samples;
+        match name {
+            "t" => PyList::new(py, samples.iter().map(|s| s.t)),
+            "bus" => {
+                let mut buses = BusNames::default();
+                PyList::new(py, samples.iter().map(|s| buses.get(py, &s.bus)))
+            }
+            "device" => PyList::new(py, samples.iter().map(|s| s.device)),
+            "protocol" => {
+                // the interned names materialization uses, looked up once per protocol
+                let mut names: Vec<(&'static str, Bound<'py, PyString>)> = Vec::new();
+                PyList::new(
+                    py,
+                    samples.iter().map(|s| {
+                        match names.iter().find(|(p, _)| std::ptr::eq(*p, s.protocol)) {
+                            Some((_, obj)) => obj.clone(),
+                            None => {
+                                let obj = PyString::intern(py, s.protocol);
+                                names.push((s.protocol, obj.clone()));
+                                obj
+                            }
+                        }
+                    }),
+                )
+            }
+            "seq" => PyList::new(py, samples.iter().map(|s| s.seq)),
+            "changed" => {
+                let keys = value_keys(py);
+                let dicts = samples
+                    .iter()
+                    .map(|s| {
+                        let d = PyDict::new(py);
+                        for field in s.changed.iter() {
+                            d.set_item(
+                                keys[field].bind(py),
+                                slot_to_py(py, &s.values.slots[field])?,
+                            )?;
+                        }
+                        Ok(d)
+                    })
+                    .collect::<PyResult<Vec<_>>>()?;
+                PyList::new(py, dicts)
+            }
+            "values" => {
+                let mut maker = ValuesDicts::default();
+                let dicts = samples
+                    .iter()
+                    .map(|s| maker.make(py, s))
+                    .collect::<PyResult<Vec<_>>>()?;
+                PyList::new(py, dicts)
+            }
+            _ => Err(PyAttributeError::new_err(format!(
+                "'StateSample' object has no attribute '{name}'"
+            ))),
+        }
+    }
+}
+
+/// One str object per bus name (a batch has a few buses; the samples of one share an `Arc`).
+#[derive(Default)]
+struct BusNames<'py> {
+    seen: Vec<(Arc<str>, Bound<'py, PyString>)>,
+}
+
+impl<'py> BusNames<'py> {
+    fn get(&mut self, py: Python<'py>, bus: &Arc<str>) -> Bound<'py, PyString> {
+        if let Some((_, obj)) = self.seen.iter().find(|(b, _)| Arc::ptr_eq(b, bus)) {
+            return obj.clone();
+        }
+        let obj = PyString::new(py, bus);
+        self.seen.push((bus.clone(), obj.clone()));
+        obj
+    }
+}
+
+/// The `values` dicts of a column. A gripper's values change by a few fields from one sample
+/// to its next, so a sample's dict is a copy of the one made for the gripper's last sample
+/// (every key already in place, in order) with only the values that differ replaced: the
+/// unchanged entries keep that dict's objects, which are immutable (None, bool, int, float,
+/// str), so sharing them shows nowhere. Other values (lists, dicts) are made anew every time.
+#[derive(Default)]
+struct ValuesDicts<'a, 'py> {
+    last: FastMap<(usize, i64), (&'a Values, Bound<'py, PyDict>)>,
+}
+
+impl<'a, 'py> ValuesDicts<'a, 'py> {
+    fn make(&mut self, py: Python<'py>, s: &'a Sample) -> PyResult<Bound<'py, PyDict>> {
+        let key = (Arc::as_ptr(&s.bus) as *const u8 as usize, s.device);
+        let Some((prev, prev_dict)) = self.last.get(&key) else {
+            let d = values_dict(py, &s.values)?;
+            self.last.insert(key, (&s.values, d.clone()));
+            return Ok(d);
+        };
+        let keys = value_keys(py);
+        let d = prev_dict.copy()?;
+        for (i, (slot, old)) in s.values.slots.iter().zip(&prev.slots).enumerate() {
+            if !same_object(slot, old) {
+                d.set_item(keys[i].bind(py), slot_to_py(py, slot)?)?;
+            }
+        }
+        let counters = [
+            (s.values.frames, prev.frames),
+            (s.values.errors, prev.errors),
+            (s.values.unanswered, prev.unanswered),
+        ];
+        for (key, (n, old)) in keys[SLOTS..].iter().zip(counters) {
+            if n != old {
+                d.set_item(key.bind(py), n)?;
+            }
+        }
+        self.last.insert(key, (&s.values, d.clone()));
+        Ok(d)
+    }
+}
+
+/// Whether the Python object made for `old` may stand for `new` too: an equal immutable value
+/// of the same type (floats by their bits: 0.0 and -0.0 differ).
+fn same_object(new: &Slot, old: &Slot) -> bool {
+    match (new, old) {
+        (Slot::Null, Slot::Null) => true,
+        (Slot::Int(a), Slot::Int(b)) => a == b,
+        (Slot::Float(a), Slot::Float(b)) => a.to_bits() == b.to_bits(),
+        (Slot::Bool(a), Slot::Bool(b)) => a == b,
+        (Slot::Text(a), Slot::Text(b)) => a == b,
+        _ => false, // Other: a list or a dict, which a sample must not share
     }
 }
 
