@@ -338,7 +338,7 @@ def decode_part(part: Part) -> PartResult:
 def _worker_init() -> None:
     # Ctrl-C goes to the whole process group: the parent alone reports it, once
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    gc.disable()  # records hold no cycles (see commands.common.batch_gc)
+    gc.disable()  # records hold no cycles (see session.rare_gc)
 
 
 # -- the parent --------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ session cleanly: held bytes and requests are decided and every listener is close
 
 from __future__ import annotations
 
+import gc
 import signal
 import threading
 import time
@@ -103,7 +104,7 @@ class Session:
             deadline = time.monotonic() + self.options.duration
         # samples cost a copy of the state per reading: made only when someone reads them
         self.tracker.samples = any(x.wants_states for x in self.listeners)
-        with _signals_as_interrupt():
+        with _signals_as_interrupt(), rare_gc():
             try:
                 self.source.start()
                 for batch in self.source.batches(self._stop):
@@ -230,6 +231,34 @@ def live_session(
 ) -> Session:
     """A session on live taps (``options``: the fields of SessionOptions)."""
     return Session(LiveSource(taps, queue_size), listeners, SessionOptions(**options))
+
+
+_gc_lock = threading.Lock()
+_gc_users = 0
+_gc_before: tuple[int, int, int] = (0, 0, 0)
+
+
+@contextmanager
+def rare_gc() -> Iterator[None]:
+    """Records hold no reference cycles, so refcounting frees them; with the default
+    thresholds the cyclic collector re-walks the live objects every few hundred allocations
+    (a large decode's throughput halves; a live view's session thread spends a quarter of its
+    time there). While sessions run it runs rarely instead, so memory stays bounded even if a
+    library makes cycles. The thresholds are the process's: the first of concurrent sessions
+    sets them, the last one restores them."""
+    global _gc_users, _gc_before
+    with _gc_lock:
+        if _gc_users == 0:
+            _gc_before = gc.get_threshold()
+            gc.set_threshold(100_000, 50, 1000)
+        _gc_users += 1
+    try:
+        yield
+    finally:
+        with _gc_lock:
+            _gc_users -= 1
+            if _gc_users == 0:
+                gc.set_threshold(*_gc_before)
 
 
 @contextmanager

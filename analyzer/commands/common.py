@@ -4,10 +4,8 @@ options, their checks, and running a capture through one session."""
 from __future__ import annotations
 
 import argparse
-import gc
 import sys
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -258,23 +256,6 @@ class ProgressListener(Listener):
         self.progress.stop()
 
 
-@contextmanager
-def batch_gc() -> Iterator[None]:
-    """Records hold no reference cycles, so refcounting frees them; with the default
-    thresholds the cyclic collector re-walks the live objects every few hundred allocations
-    (the throughput of a large decode halves). While decoding it runs rarely instead, so
-    memory stays bounded even if a library makes cycles."""
-    was_enabled = gc.isenabled()
-    old = gc.get_threshold()
-    gc.set_threshold(100_000, 50, 1000)  # rare collections instead of none: bounded memory
-    try:
-        yield
-    finally:
-        gc.set_threshold(*old)
-        if not was_enabled:
-            gc.disable()
-
-
 def run_capture(
     opts: CaptureOptions, listeners: list[Listener], reader: CaptureReader | None = None
 ) -> tuple[Session, CaptureReader]:
@@ -288,7 +269,7 @@ def run_capture(
         listeners = [*listeners, ProgressListener(reader)]
     options = SessionOptions(protocol=byte_protocol(opts), engine=opts.engine)
     session = Session(CaptureSource(reader, opts.speed), listeners, options)
-    with reader, batch_gc():
+    with reader:
         session.run()
     return session, reader
 

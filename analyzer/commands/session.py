@@ -19,7 +19,7 @@ from ..session import Session, SessionOptions
 from ..sinks.text import format_event, use_colour
 from ..sources.live import Tap
 from ..sources.source import LiveSource
-from .common import batch_gc, exit_code, positive_float, positive_int
+from .common import exit_code, positive_float, positive_int
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
@@ -161,8 +161,7 @@ def run_session(
         session.listeners.append(StatusLine(session, what, taps, sys.stderr))
     if on_start is not None:
         source.on_started = on_start
-    with batch_gc():  # rare collections, as when decoding a capture (see batch_gc)
-        counts = session.run()
+    counts = session.run()
     where = f" into {args.output}" if args.output else ""
     print(f"eg2scope: {counts.line()}{where}", file=sys.stderr)
     for listener, failure in session.detached:

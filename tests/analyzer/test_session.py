@@ -3,12 +3,15 @@ reading, and the recording's /state samples matching the decoded readings one fo
 
 from __future__ import annotations
 
+import gc
 import io
 import os
 import threading
 import time
 import tty
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import orjson
 import pytest
@@ -231,3 +234,43 @@ def test_a_gap_decides_the_bytes_held_before_it_and_shows_in_place() -> None:
     Session(Replay(), [JsonlListener(out)], SessionOptions(protocol="eg2-serial")).run()
     kinds = [(d["kind"], d.get("offset")) for d in map(orjson.loads, out.getvalue().splitlines())]
     assert kinds == [("frame", 0), ("truncated", 6), ("event", None), ("frame", 9)]
+
+
+def test_sessions_collect_garbage_rarely_and_restore_the_thresholds() -> None:
+    """While any session runs the cyclic collector runs rarely (session.rare_gc). Sessions
+    overlap (a TUI and a test, two threads): the first one to end must not put the thresholds
+    back under the other; the last one does."""
+    before = gc.get_threshold()
+    a_in, b_in = threading.Event(), threading.Event()
+    seen: list[tuple[int, int, int]] = []
+
+    class Watch(Listener):
+        def __init__(self, on_first: Any) -> None:
+            self.on_first = on_first
+
+        def on_records(self, records: Sequence[Record]) -> None:
+            if self.on_first is not None:
+                self.on_first()
+                self.on_first = None
+            seen.append(gc.get_threshold())
+
+    def capture(on_first: Any) -> None:
+        reader = open_capture(str(CAPTURES / "serial_session.bin"))
+        with reader:
+            Session(CaptureSource(reader), [Watch(on_first)]).run()
+
+    def a_first() -> None:  # A waits until B runs, then ends
+        a_in.set()
+        assert b_in.wait(10)
+
+    def b_first() -> None:  # B waits until A has ended, then reads the thresholds
+        b_in.set()
+        a.join(10)
+
+    a = threading.Thread(target=capture, args=(a_first,))
+    a.start()
+    assert a_in.wait(10)
+    capture(b_first)
+    assert not a.is_alive()
+    assert seen and all(x[0] == 100_000 for x in seen), seen
+    assert gc.get_threshold() == before

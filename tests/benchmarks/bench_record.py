@@ -36,7 +36,6 @@ sys.path.insert(0, str(HERE))
 import can  # noqa: E402
 from traffic import can_frames, modbus_frames  # noqa: E402
 
-from analyzer.commands.common import batch_gc  # noqa: E402
 from analyzer.recording import McapRecorder  # noqa: E402
 from analyzer.session import live_session  # noqa: E402
 from analyzer.sources.can_tap import CanTap  # noqa: E402
@@ -74,21 +73,20 @@ def bench_can(rate: int, duration: float, out: Path) -> dict:
         thread.start()
 
     session.source.on_started = start_flood
-    with batch_gc():  # as run_session (eg2scope record) runs a session
-        cpu0, wall0 = time.process_time(), time.perf_counter()
-        runner = threading.Thread(target=session.run)
-        runner.start()
-        time.sleep(0.2)
-        thread.join()
-        # let the recorder drain what is queued, then stop
-        deadline = time.perf_counter() + 5
-        while session.counts.items < flood["sent"] and time.perf_counter() < deadline:
-            time.sleep(0.05)
-        lag = time.perf_counter()
-        session.stop()
-        runner.join()
-        wall = time.perf_counter() - wall0
-        cpu = time.process_time() - cpu0 - flood["cpu"]
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    runner = threading.Thread(target=session.run)
+    runner.start()
+    time.sleep(0.2)
+    thread.join()
+    # let the recorder drain what is queued, then stop
+    deadline = time.perf_counter() + 5
+    while session.counts.items < flood["sent"] and time.perf_counter() < deadline:
+        time.sleep(0.05)
+    lag = time.perf_counter()
+    session.stop()
+    runner.join()
+    wall = time.perf_counter() - wall0
+    cpu = time.process_time() - cpu0 - flood["cpu"]
     captured = session.counts.items
     return {
         "rate": rate,
