@@ -70,7 +70,7 @@ async def bench_capture(n: int) -> None:
                 await asyncio.sleep(0.05)
             whole = time.perf_counter() - t0
             t1 = time.perf_counter()
-            app.frames.set_filter(parse("dev == 1 and latency > 0.5"))
+            app.frames.set_filter(parse("dev == 1 and latency > 0.1"))
             await pilot.pause()
             filtered = time.perf_counter() - t1
             shown = app.frames.row_count
