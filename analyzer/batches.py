@@ -154,6 +154,44 @@ def sample_keys(samples: Sequence[StateSample]) -> list[tuple[str, int]]:
     return [(s.bus, s.device) for s in samples]
 
 
+Series = tuple[str, int, tuple[str, ...], list[float | None], list[int], list[list[Any]]]
+
+
+def sample_series(samples: Sequence[StateSample], fields: Sequence[str]) -> list[Series]:
+    """The samples that changed any of ``fields``, grouped by gripper and by which of them
+    they changed: ``(bus, device, names, times, seqs, columns)`` per group, in the order groups
+    first appear, ``names`` in the order of ``fields``, one column of values per name (as the
+    samples hold them), samples in order. What a plot sends: a column per quantity."""
+    if isinstance(samples, SampleBatch) and hasattr(samples, "series"):
+        return samples.series(tuple(fields))
+    wanted = tuple(fields)
+    groups: dict[tuple[str, int, tuple[str, ...]], Series] = {}
+    names_of: dict[tuple[str, ...], tuple[str, ...]] = {}  # changed keys -> names among fields
+    for s in samples:
+        changed = s.changed
+        keys = tuple(changed)
+        names = names_of.get(keys)
+        if names is None:
+            names = names_of[keys] = tuple(f for f in wanted if f in changed)
+        if not names:
+            continue
+        group = groups.get((s.bus, s.device, names))
+        if group is None:
+            group = groups[(s.bus, s.device, names)] = (
+                s.bus,
+                s.device,
+                names,
+                [],
+                [],
+                [[] for _ in names],
+            )
+        group[3].append(s.t)
+        group[4].append(s.seq)
+        for column_, name in zip(group[5], names, strict=True):
+            column_.append(changed[name])
+    return list(groups.values())
+
+
 def sample_messages(samples: Sequence[StateSample]) -> list[bytes]:
     """Each sample as its flat JSON object (``StateSample.to_dict``), one bytes object each."""
     if isinstance(samples, SampleBatch):

@@ -25,9 +25,10 @@ from __future__ import annotations
 import threading
 import time
 from array import array
+from bisect import bisect_left
 from collections.abc import Sequence
-from itertools import groupby
-from operator import itemgetter
+from itertools import compress, groupby, repeat
+from operator import eq
 from typing import Any, Final
 
 import numpy as np
@@ -40,7 +41,7 @@ from decoders.modbus_pdu import READ_HOLDING
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
 
 from .. import rerun_entities as ent
-from ..batches import column, problem_indexes
+from ..batches import column, problem_indexes, sample_series
 from ..listener import Listener
 from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
 from ..rerun_blueprint import Layout, blueprint
@@ -72,20 +73,29 @@ _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": 
 # the state fields plotted, in the order their entities are sent
 _PLOTTED: Final = (*(s.field for s in ent.SERIES), *ent.LANES)
 
-# what on_states reads of each sample
-_SAMPLE_COLUMNS: Final = ("bus", "device", "changed", "t", "seq")
-
 
 def _shown(records: Sequence[Record]) -> list[int]:
-    """The indexes of the records the logs show: those with problems, and the controller's
-    commands (requests that are not polls)."""
+    """The indexes of the records the logs show, in order: those with problems, and the
+    controller's commands (requests that are not polls)."""
     shown = problem_indexes(records)
     directions = column(records, "direction")
-    asks = [i for i, d in enumerate(directions) if d == REQUEST]
+    asks = list(compress(range(len(directions)), map(eq, directions, repeat(REQUEST))))
     if asks:
         protocols, codes = column(records, "protocol"), column(records, "code")
         shown += [i for i in asks if (protocols[i], codes[i]) not in _POLLS]
+        shown = sorted(set(shown))
     return shown
+
+
+def _runs(buses: list[str]) -> list[tuple[str, int, int]]:
+    """(bus, first index, end index) of each run of records of one bus."""
+    if buses and buses.count(buses[0]) == len(buses):
+        return [(buses[0], 0, len(buses))]
+    runs = []
+    for name, group in groupby(range(len(buses)), buses.__getitem__):
+        indexes = list(group)
+        runs.append((name, indexes[0], indexes[-1] + 1))
+    return runs
 
 
 class _Entity:
@@ -143,37 +153,61 @@ _Rows = tuple[str, np.ndarray, np.ndarray, Any]
 
 
 class _Shape:
-    """The samples of one gripper that changed the same fields (a reply to one kind of read),
-    as columns: times (NaN: none), seqs, and the plotted fields' values row by row (``fields``:
-    the plotted ones among them, in order), cut from each sample with one C-level call. A
-    sample with a value that is not a number (None: named without a value) goes to its
-    gripper's ``odd`` columns instead."""
+    """The samples of one gripper that changed the same plotted fields (a reply to one kind of
+    read), as columns: times (NaN: none), seqs, and one column of values per field. A sample
+    with a value that is not a number (None: named without a value) goes to its gripper's
+    ``odd`` columns instead."""
 
-    __slots__ = ("add_seq", "add_t", "fields", "get", "gripper", "put", "seq", "t", "values")
+    __slots__ = ("fields", "gripper", "seq", "t", "values")
 
     def __init__(self, gripper: _Gripper, fields: tuple[str, ...]) -> None:
         self.gripper = gripper
         self.fields = fields
-        self.get = itemgetter(*fields)  # one field: the value, else a tuple
         self._start()
 
     def _start(self) -> None:
         self.t = array("d")
         self.seq = array("q")
-        self.values = array("d")
-        self.add_t = self.t.append
-        self.add_seq = self.seq.append
-        self.put = self.values.append if len(self.fields) == 1 else self.values.extend
+        self.values = [array("d") for _ in self.fields]
 
-    def drop_partial(self) -> None:
-        """Undo what a failed ``put`` appended of the row it was adding."""
-        del self.values[len(self.seq) * len(self.fields) :]
+    def extend(
+        self, times: list[float | None], seqs: list[int], columns: list[list[Any]]
+    ) -> list[int]:
+        """Add rows (a group of ``batches.sample_series``); the rows with a value that is not
+        a number are left out and their indexes returned."""
+        try:
+            numbers = [array("d", c) for c in columns]
+        except TypeError:  # None, or not a number: row by row
+            return self._extend_rows(times, seqs, columns)
+        stamps: list[Any] = times if None not in times else [NAN if t is None else t for t in times]
+        self.t.fromlist(stamps)
+        self.seq.fromlist(seqs)
+        for values, new in zip(self.values, numbers, strict=True):
+            values.extend(new)
+        return []
 
-    def take(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _extend_rows(
+        self, times: list[float | None], seqs: list[int], columns: list[list[Any]]
+    ) -> list[int]:
+        odd = []
+        for k, row in enumerate(zip(*columns, strict=True)):
+            try:
+                numbers = array("d", row)
+            except TypeError:
+                odd.append(k)
+                continue
+            t = times[k]
+            self.t.append(NAN if t is None else t)
+            self.seq.append(seqs[k])
+            for values, x in zip(self.values, numbers, strict=True):
+                values.append(x)
+        return odd
+
+    def take(self) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
         """(t, seq, values: one column per field); the shape starts empty."""
         t, seq, values = self.t, self.seq, self.values
         self._start()
-        columns = np.frombuffer(values, dtype=np.float64).reshape(len(seq), len(self.fields))
+        columns = [np.frombuffer(v, dtype=np.float64) for v in values]
         return np.frombuffer(t), np.frombuffer(seq, dtype=np.int64), columns
 
 
@@ -217,7 +251,7 @@ class _Gripper:
         for shape in self.shapes:
             if shape.seq:
                 t, seq, columns = shape.take()
-                rows += [(f, t, seq, columns[:, i]) for i, f in enumerate(shape.fields)]
+                rows += [(f, t, seq, c) for f, c in zip(shape.fields, columns, strict=True)]
         for field, c in self.odd.items():
             if c.values:
                 t, odd_seq, values, _ = c.take()
@@ -333,7 +367,7 @@ class RerunListener(Listener):
         self.session_errors: _Columns | None = None
         # (bus, device, *fields changed) -> the shape its samples are filed under; False: a
         # shape with nothing plotted (a poll's last_command, a write's latency)
-        self._shapes: dict[tuple[Any, ...], _Shape | bool] = {}
+        self._shapes: dict[tuple[str, int, tuple[str, ...]], _Shape] = {}
         self._timed = self._untimed = False  # rows with and without capture_time were sent
         self._sent_layout: Layout | None = self.layout if live else None
         self._pending = 0
@@ -359,53 +393,49 @@ class RerunListener(Listener):
     # -- what the session gives ------------------------------------------------------------
 
     def on_states(self, samples: Sequence[StateSample]) -> None:
-        """File each sample under its shape (a column at a time: a native batch makes no
-        samples)."""
+        """File the samples under their shapes, a column per plotted field
+        (``batches.sample_series``: a native batch makes no samples)."""
         with self._lock:
             self._raise_failure()
-            shapes = self._shapes
-            rows = zip(*(column(samples, n) for n in _SAMPLE_COLUMNS), strict=True)
-            for bus, device, changed, t, seq in rows:
-                shape = shapes.get((bus, device, *changed))
-                if shape:
-                    try:
-                        shape.put(shape.get(changed))  # type: ignore[union-attr]
-                    except TypeError:  # None, or not a number
-                        self._odd(shape, t, seq, changed)  # type: ignore[arg-type]
-                        continue
-                    shape.add_t(NAN if t is None else t)  # type: ignore[union-attr]
-                    shape.add_seq(seq)  # type: ignore[union-attr]
-                elif shape is None:
-                    self._new_shape(bus, device, changed, t, seq)
+            for bus, device, fields, times, seqs, columns in sample_series(samples, _PLOTTED):
+                shape = self._shapes.get((bus, device, fields))
+                if shape is None:
+                    shape = self._new_shape(bus, device, fields)
+                for k in shape.extend(times, seqs, columns):
+                    self._odd(shape, times[k], seqs[k], [c[k] for c in columns])
             self._pending += len(samples)
             self._mid_batch = False
             self._batch_done.notify_all()
 
     def on_records(self, records: Sequence[Record]) -> None:
         """Times per bus for the health rates, latencies, and the few records the logs show
-        (problems, commands), made into objects only those (a column at a time otherwise)."""
+        (problems, commands), made into objects only those (columns otherwise, in C loops:
+        a capture's million records pass through here)."""
         with self._lock:
             self._raise_failure()
             self._mid_batch = True  # its samples come next
-            buses, times = column(records, "bus"), column(records, "t")
-            latencies, seqs = column(records, "latency_ms"), column(records, "seq")
-            shown = set(_shown(records))
-            for name, group in groupby(range(len(buses)), buses.__getitem__):
-                run = list(group)
+            times = column(records, "t")
+            stamps = np.array(times, dtype=np.float64)  # None -> NaN
+            latencies = np.array(column(records, "latency_ms"), dtype=np.float64)
+            seqs = np.array(column(records, "seq"), dtype=np.int64)
+            shown = _shown(records)
+            for name, lo, hi in _runs(column(records, "bus")):
                 bus = self.buses.get(name) or self._bus(name)
-                bus.times.fromlist([t for t in map(times.__getitem__, run) if t is not None])
-                for i in (i for i in run if i in shown):
+                part = times[lo:hi]
+                bus.times.fromlist(part if None not in part else [t for t in part if t is not None])
+                for i in shown[bisect_left(shown, lo) : bisect_left(shown, hi)]:
                     rec = records[i]
                     if rec.errors or rec.warnings:
                         self._problem(bus, rec)
                     else:
                         self._command(rec, "INFO")
-                timed = [i for i in run if latencies[i] is not None and times[i] is not None]
-                if timed:  # a latency needs both times: never NaN
+                # a latency needs both times: never NaN
+                timed = ~(np.isnan(latencies[lo:hi]) | np.isnan(stamps[lo:hi]))
+                if timed.any():
                     latency = bus.latency
-                    latency.t.fromlist([times[i] for i in timed])
-                    latency.seq.fromlist([seqs[i] for i in timed])  # type: ignore[union-attr]
-                    latency.values.fromlist([latencies[i] for i in timed])
+                    latency.t.frombytes(stamps[lo:hi][timed].tobytes())
+                    latency.seq.frombytes(seqs[lo:hi][timed].tobytes())  # type: ignore[union-attr]
+                    latency.values.frombytes(latencies[lo:hi][timed].tobytes())
             self._pending += len(records)
 
     def _problem(self, bus: _Bus, rec: Record) -> None:
@@ -665,32 +695,16 @@ class RerunListener(Listener):
 
     # -- parts -----------------------------------------------------------------------------
 
-    def _new_shape(
-        self, bus: str, device: int, changed: dict[str, Any], t: float | None, seq: int
-    ) -> None:
-        """File the first sample of a new shape (or note that it plots nothing)."""
-        key = (bus, device, *changed)
-        fields = tuple(f for f in _PLOTTED if f in changed)
-        if not fields:
-            self._shapes[key] = False
-            return
+    def _new_shape(self, bus: str, device: int, fields: tuple[str, ...]) -> _Shape:
         g = self.grippers.get((bus, device)) or self._gripper(bus, device)
-        shape = self._shapes[key] = _Shape(g, fields)
+        shape = self._shapes[(bus, device, fields)] = _Shape(g, fields)
         g.shapes.append(shape)
-        try:
-            shape.put(shape.get(changed))
-        except TypeError:
-            self._odd(shape, t, seq, changed)
-            return
-        shape.add_t(NAN if t is None else t)
-        shape.add_seq(seq)
+        return shape
 
-    def _odd(self, shape: _Shape, t: float | None, seq: int, changed: dict[str, Any]) -> None:
+    def _odd(self, shape: _Shape, t: float | None, seq: int, row: list[Any]) -> None:
         """A sample with a value that is not a number: its fields one by one (None: none)."""
-        shape.drop_partial()
         g = shape.gripper
-        for field in shape.fields:
-            value = changed[field]
+        for field, value in zip(shape.fields, row, strict=True):
             if value is None:
                 continue
             c = g.odd.get(field)
