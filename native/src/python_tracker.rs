@@ -6,7 +6,9 @@
 //! or iterated (and then the same object every time), with bulk methods that need no Python
 //! object per sample: `messages()` (each sample's JSON, byte-identical to
 //! `orjson.dumps(sample.to_dict(), default=json_default)`), `times()`, `keys()`, `column(name)`
-//! (any attribute, as `[getattr(s, name) for s in batch]`; tests/native/test_batch_columns.py).
+//! (any attribute, as `[getattr(s, name) for s in batch]`; tests/native/test_batch_columns.py),
+//! `series(fields)` (analyzer/batches.py `sample_series`: the values of some fields grouped by
+//! gripper, what the Rerun listener plots; tests/native/test_sample_series.py).
 //! `Tracker.states` builds fresh `analyzer.tracker.DeviceState` objects equal to the Python
 //! tracker's.
 //!
@@ -404,6 +406,180 @@ impl SampleBatch {
                 "'StateSample' object has no attribute '{name}'"
             ))),
         }
+    }
+
+    /// `analyzer.batches.sample_series(list(batch), fields)`, read from the samples (no
+    /// StateSample is made): the samples that changed any of `fields`, grouped by (bus,
+    /// device, names), `names` the fields among `fields` the sample changed, in `fields` order
+    /// (a field given twice is named and filled twice, as there); per group
+    /// `(bus, device, names, times, seqs, columns)` in the order groups first appear, one column
+    /// of values per name, each value as the sample's `changed` holds it.
+    fn series<'py>(
+        &self,
+        py: Python<'py>,
+        fields: &Bound<'py, PyTuple>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let samples = &self.samples;
+        if samples.is_empty() {
+            // the Python looks no field up before a sample (an unhashable one raises only then)
+            return Ok(PyList::empty(py));
+        }
+        // the fields a sample can have changed, with their slots, in `fields` order; looked up
+        // in a dict of the slot names, as the Python's `field in changed` does (a str subclass,
+        // an unhashable field's TypeError); the others never match
+        let slot_of = slot_names(py)?.bind(py);
+        let mut want: Vec<(usize, Bound<'py, PyAny>)> = Vec::with_capacity(fields.len());
+        let mut wanted: u16 = 0;
+        for field in fields.iter() {
+            if let Some(slot) = slot_of.get_item(&field)? {
+                let slot: usize = slot.extract()?;
+                wanted |= 1 << slot;
+                want.push((slot, field));
+            }
+        }
+        if wanted == 0 {
+            return Ok(PyList::empty(py));
+        }
+
+        // a group's names follow from the wanted fields its samples changed (a bit set over
+        // the slots), so (bus, device, those bits) is the Python's (bus, device, names)
+        let mut buses = BusIds::default();
+        let mut group_of: FastMap<(u32, i64, u16), usize> = FastMap::default();
+        let mut groups: Vec<Group> = Vec::new();
+        for (i, s) in samples.iter().enumerate() {
+            let changed = s.changed.iter().fold(0u16, |m, f| m | 1 << f) & wanted;
+            if changed == 0 {
+                continue;
+            }
+            let key = (buses.id(&s.bus), s.device, changed);
+            let g = *group_of.entry(key).or_insert_with(|| {
+                groups.push(Group {
+                    first: i,
+                    changed,
+                    rows: Vec::new(),
+                });
+                groups.len() - 1
+            });
+            groups[g].rows.push(i);
+        }
+
+        let mut names = BusNames::default();
+        let out = groups
+            .iter()
+            .map(|g| {
+                let first = &samples[g.first];
+                let named: Vec<_> = want
+                    .iter()
+                    .filter(|(slot, _)| g.changed & 1 << slot != 0)
+                    .collect();
+                let rows = || g.rows.iter().map(|&i| &samples[i]);
+                let columns = named
+                    .iter()
+                    .map(|(slot, _)| column(py, rows().map(|s| &s.values.slots[*slot])))
+                    .collect::<PyResult<Vec<_>>>()?;
+                PyTuple::new(
+                    py,
+                    [
+                        names.get(py, &first.bus).into_any(),
+                        first.device.into_pyobject(py)?.into_any(),
+                        PyTuple::new(py, named.iter().map(|(_, field)| field))?.into_any(),
+                        PyList::new(py, rows().map(|s| s.t))?.into_any(),
+                        PyList::new(py, rows().map(|s| s.seq))?.into_any(),
+                        PyList::new(py, columns)?.into_any(),
+                    ],
+                )
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        PyList::new(py, out)
+    }
+}
+
+/// The slot fields' names (VALUE_KEYS but the counters, which no sample changes) -> slot.
+fn slot_names(py: Python<'_>) -> PyResult<&Py<PyDict>> {
+    static SLOT_NAMES: GILOnceCell<Py<PyDict>> = GILOnceCell::new();
+    SLOT_NAMES.get_or_try_init(py, || {
+        let d = PyDict::new(py);
+        for (slot, key) in value_keys(py)[..SLOTS].iter().enumerate() {
+            d.set_item(key.bind(py), slot)?;
+        }
+        Ok(d.unbind())
+    })
+}
+
+/// One group of `SampleBatch.series`: the index of its first sample, the wanted fields its
+/// samples changed (bits by slot) and the indexes of its samples.
+struct Group {
+    first: usize,
+    changed: u16,
+    rows: Vec<usize>,
+}
+
+/// A small number per bus name (equal names are one bus, whichever `Arc` holds them).
+#[derive(Default)]
+struct BusIds<'a> {
+    seen: Vec<&'a Arc<str>>,
+    last: Option<(&'a Arc<str>, u32)>,
+}
+
+impl<'a> BusIds<'a> {
+    #[inline]
+    fn id(&mut self, bus: &'a Arc<str>) -> u32 {
+        if let Some((b, id)) = self.last {
+            if Arc::ptr_eq(b, bus) {
+                return id;
+            }
+        }
+        let id = match self
+            .seen
+            .iter()
+            .position(|b| Arc::ptr_eq(b, bus) || **b == *bus)
+        {
+            Some(id) => id,
+            None => {
+                self.seen.push(bus);
+                self.seen.len() - 1
+            }
+        } as u32;
+        self.last = Some((bus, id));
+        id
+    }
+}
+
+/// A column of values as Python objects. Readings repeat (a state, a fault, a temperature):
+/// a value that is the same immutable object as the one before it (`same_object`) takes that
+/// object again instead of a new one.
+fn column<'a, 'py>(
+    py: Python<'py>,
+    values: impl ExactSizeIterator<Item = &'a Slot>,
+) -> PyResult<Bound<'py, PyList>> {
+    let mut last: Option<(&Slot, Bound<'py, PyAny>)> = None;
+    PyList::new(
+        py,
+        values.map(|v| {
+            if let Some((prev, obj)) = &last {
+                if same_object(v, prev) {
+                    return Made(Ok(obj.clone()));
+                }
+            }
+            let made = slot_to_py(py, v);
+            if let Ok(obj) = &made {
+                last = Some((v, obj.clone()));
+            }
+            Made(made)
+        }),
+    )
+}
+
+/// A value made for a list (`PyList::new` takes the error of any).
+struct Made<'py>(PyResult<Bound<'py, PyAny>>);
+
+impl<'py> IntoPyObject<'py> for Made<'py> {
+    type Target = PyAny;
+    type Output = Bound<'py, PyAny>;
+    type Error = PyErr;
+
+    fn into_pyobject(self, _py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.0
     }
 }
 
