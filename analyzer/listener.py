@@ -34,7 +34,8 @@ class Listener(ABC):
 
     @abstractmethod
     def on_records(self, records: Sequence[Record]) -> None:
-        """Decoded records, in stream order."""
+        """Decoded records, in stream order: a list, or the native core's lazy ``RecordBatch``
+        (a sequence of the same records; ``analyzer.batches`` reads either in bulk)."""
 
     def on_states(self, samples: Sequence[StateSample]) -> None:
         """State samples (one per record that set a gripper's state), in stream order."""
