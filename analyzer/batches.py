@@ -63,12 +63,12 @@ def session_engine(
     """The decoding and tracker of a session whose source gives ``kind`` input ("can", "bytes"
     or "mixed"): the native core's for CAN input when it is built (``engine`` "auto") or asked
     for ("native": ValueError where it cannot be used), else the Python ones."""
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; choose from {', '.join(ENGINES)}")
     native = kind == "can" and native_session_available()
     if engine == "native" and not native:
         why = "it is not built" if not native_session_available() else "the input is not CAN"
         raise ValueError(f"the native engine cannot decode this session: {why}")
-    if engine not in ENGINES:
-        raise ValueError(f"unknown engine {engine!r}; choose from {', '.join(ENGINES)}")
     if native and engine != "python":
         return NativeCanDecoding(positional), _native.Tracker()  # type: ignore[union-attr]
     decoding = Decoding(protocol, per_bus, positional_seq=positional, byte_time_s=byte_time_s)
@@ -89,7 +89,7 @@ class NativeCanDecoding:
 def column(items: Sequence[Any], name: str) -> list[Any]:
     """``[getattr(x, name) for x in items]`` for records or samples; a native batch reads it
     from its Rust data without making an object per item."""
-    if isinstance(items, (RecordBatch, SampleBatch)) and hasattr(items, "column"):
+    if isinstance(items, (RecordBatch, SampleBatch)):
         return items.column(name)
     return list(map(attrgetter(name), items))
 
@@ -99,18 +99,6 @@ def error_count(records: Sequence[Record]) -> int:
     if isinstance(records, RecordBatch):
         return records.error_count()
     return sum(1 for r in records if r.errors)
-
-
-def record_times(records: Sequence[Record]) -> list[float | None]:
-    if isinstance(records, RecordBatch):
-        return records.times()
-    return [r.t for r in records]
-
-
-def record_buses(records: Sequence[Record]) -> list[str]:
-    if isinstance(records, RecordBatch):
-        return records.buses()
-    return [r.bus for r in records]
 
 
 def problem_indexes(records: Sequence[Record]) -> list[int]:
@@ -141,12 +129,6 @@ def records_jsonl(records: Sequence[Record]) -> bytes:
     return b"".join([dumps(r.to_dict()) + b"\n" for r in records])
 
 
-def sample_times(samples: Sequence[StateSample]) -> list[float | None]:
-    if isinstance(samples, SampleBatch):
-        return samples.times()
-    return [s.t for s in samples]
-
-
 def sample_keys(samples: Sequence[StateSample]) -> list[tuple[str, int]]:
     """(bus, device) of each sample."""
     if isinstance(samples, SampleBatch):
@@ -162,7 +144,7 @@ def sample_series(samples: Sequence[StateSample], fields: Sequence[str]) -> list
     they changed: ``(bus, device, names, times, seqs, columns)`` per group, in the order groups
     first appear, ``names`` in the order of ``fields``, one column of values per name (as the
     samples hold them), samples in order. What a plot sends: a column per quantity."""
-    if isinstance(samples, SampleBatch) and hasattr(samples, "series"):
+    if isinstance(samples, SampleBatch):
         return samples.series(tuple(fields))
     wanted = tuple(fields)
     groups: dict[tuple[str, int, tuple[str, ...]], Series] = {}

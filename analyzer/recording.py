@@ -90,13 +90,11 @@ from decoders.model import Chunk as ByteChunk
 from . import __version__
 from .batches import (
     can_raw_messages,
+    column,
     json_message,
-    record_buses,
     record_messages,
-    record_times,
     sample_keys,
     sample_messages,
-    sample_times,
     with_problems,
 )
 from .errors import UsageError
@@ -449,8 +447,8 @@ class McapRecorder(Closing, Listener):
         self._check_open()
         known = self._channels[RECORD]
         self._gather(
-            record_times(records),
-            [known.get(bus) or self._channel(RECORD, bus) for bus in record_buses(records)],
+            column(records, "t"),
+            [known.get(bus) or self._channel(RECORD, bus) for bus in column(records, "bus")],
             record_messages(records),
         )
         if self.log_record_problems:
@@ -464,7 +462,7 @@ class McapRecorder(Closing, Listener):
         self._check_open()
         known = self._channels[DEVICE_STATE]
         self._gather(
-            sample_times(samples),
+            column(samples, "t"),
             [known.get(key) or self._channel(DEVICE_STATE, *key) for key in sample_keys(samples)],
             sample_messages(samples),
         )
