@@ -1,0 +1,35 @@
+"""``eg2scope batch CAPTURE -o DATASET --workers 1`` on every input kind, as a real process: it
+exits 0 and the dataset holds decode's records (per bus and seq), the reference session's state
+samples and one undamaged capture row counting them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.dataset as ds
+import pytest
+from e2e_checks import eg2scope
+from e2e_inputs import IDS
+
+from analyzer.fleet import layout
+
+
+def table(root: Path, name: str) -> pa.Table:
+    return ds.dataset(root / name, format="parquet", partitioning="hive").to_table()
+
+
+@pytest.mark.parametrize("kind", IDS)
+def test_batch_one_worker(kind: str, inputs, reference, tmp_path: Path) -> None:
+    out = tmp_path / "fleet"
+    proc = eg2scope("batch", str(inputs[kind]), "-o", str(out), "--workers", "1", "--no-progress",
+                    cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr.decode()
+    decoded = reference.decoded(kind).records
+    records = table(out, layout.RECORDS)
+    assert records.num_rows == len(decoded)
+    stored = sorted(zip(records["bus"].to_pylist(), records["seq"].to_pylist(), strict=True))
+    assert stored == sorted((r["bus"], r["seq"]) for r in decoded)
+    assert table(out, layout.STATES).num_rows == len(reference.samples(kind))
+    [row] = table(out, layout.CAPTURES).to_pylist()
+    assert (row["records"], row["damaged"]) == (len(decoded), False)

@@ -1,0 +1,69 @@
+"""``eg2scope plot CAPTURE --save x.rrd`` on every input kind, read back: each gripper's
+opening samples are the readings a Python-engine session tracks from decode's records (same
+frames, same millimetres), and every view of the saved blueprint shows data. As a real process
+(its default engine), and in this process on each session engine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from e2e_checks import (
+    Rrd,
+    eg2scope,
+    empty_views,
+    force_session_engine,
+    opening_series,
+    plotted_series,
+    read_rrd,
+    recorded_openings,
+    skip_unless_native,
+)
+from e2e_inputs import CAN_IDS, IDS, LIVE_PLOT
+
+from analyzer.cli import main
+
+SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+
+
+def check_plot(rrd_path: Path, kind: str, reference) -> None:
+    expected = opening_series(reference.samples(kind))
+    decoded = {(r["bus"], r["seq"]) for r in reference.decoded(kind).records}
+    for entity, rows in expected.items():
+        bus = entity.split("/")[1]
+        assert {(bus, seq) for seq, _ in rows} <= decoded  # readings of decoded records
+    check_rrd(read_rrd(rrd_path), expected)
+
+
+def check_rrd(rrd: Rrd, expected: dict[str, list[tuple[int, float]]]) -> None:
+    """Every gripper's opening samples are ``expected`` (frame, mm); every view has data."""
+    assert expected, "the input has opening readings"
+    for entity, rows in expected.items():
+        assert plotted_series(rrd, entity) == [(seq, pytest.approx(mm)) for seq, mm in rows], entity
+    empty = empty_views(rrd)
+    assert not empty, f"{len(empty)} views without data: {'; '.join(empty)}"
+
+
+@pytest.mark.parametrize("kind", IDS)
+def test_plot_process(kind: str, inputs, reference, tmp_path: Path) -> None:
+    out = tmp_path / "plot.rrd"
+    proc = eg2scope("plot", str(inputs[kind]), "--save", str(out), "--no-progress", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr.decode()
+    check_plot(out, kind, reference)
+
+
+@pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
+def test_plot_on_each_engine(kind: str, engine: str, inputs, reference, tmp_path, monkeypatch):
+    if engine == "native":
+        skip_unless_native(session=True)
+    force_session_engine(monkeypatch, engine)
+    out = tmp_path / "plot.rrd"
+    assert main(["plot", str(inputs[kind]), "--save", str(out), "--no-progress"]) == 0
+    check_plot(out, kind, reference)
+
+
+def test_plot_live_demo_beside_its_recording(inputs) -> None:
+    """``record --demo --rerun live.rrd``: the live plot holds every opening reading the
+    session's recording holds on ``/state``."""
+    mcap = inputs[LIVE_PLOT.id]
+    check_rrd(read_rrd(mcap.with_suffix(".rrd")), recorded_openings(mcap))

@@ -1,0 +1,33 @@
+"""``eg2scope stats --format json`` on every input kind agrees with decode's records: the
+command as a real process (its default engine), and in this process on each session engine."""
+
+from __future__ import annotations
+
+import orjson
+import pytest
+from e2e_checks import eg2scope, force_session_engine, skip_unless_native, stats_of, stats_view
+from e2e_inputs import CAN_IDS, IDS
+
+from analyzer.cli import main
+
+SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+
+
+@pytest.mark.parametrize("kind", IDS)
+def test_stats_process_agrees_with_decode(kind: str, inputs, reference) -> None:
+    path = inputs[kind]
+    proc = eg2scope("stats", str(path), "--format", "json", cwd=path.parent)
+    assert proc.returncode == 0, proc.stderr.decode()
+    assert stats_view(orjson.loads(proc.stdout)) == stats_of(reference.decoded(kind))
+
+
+@pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
+def test_stats_on_each_engine_agrees_with_decode(
+    kind: str, engine: str, inputs, reference, monkeypatch, capsys
+) -> None:
+    if engine == "native":
+        skip_unless_native(session=True)
+    force_session_engine(monkeypatch, engine)
+    assert main(["stats", str(inputs[kind]), "--format", "json", "--no-progress"]) == 0
+    data = orjson.loads(capsys.readouterr().out)
+    assert stats_view(data) == stats_of(reference.decoded(kind))
