@@ -11,9 +11,10 @@ import time
 import uuid
 from collections import Counter
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import orjson
 import pytest
@@ -51,6 +52,82 @@ def eg2scope(*argv: str, cwd: Path, timeout: float = 120) -> subprocess.Complete
     return subprocess.run(
         [*EG2SCOPE, *argv], cwd=cwd, env=HEADLESS, capture_output=True, timeout=timeout
     )
+
+
+T = TypeVar("T")
+WORKERS = 3  # real processes at once: each cell's own folder, pty and ports, so this is safe
+
+
+class Prefetch(Generic[T]):
+    """The slow part of a test function's cells (real processes) run a few at a time: when the
+    first cell asks, every cell of that function pytest selected is started. ``start(**params)``
+    runs here (it may make inputs) and gives what to run on a worker thread; each cell then
+    takes its own result (or the exception it raised)."""
+
+    def __init__(
+        self,
+        request: pytest.FixtureRequest,
+        test: Callable[..., Any],
+        start: Callable[..., Callable[[], T]],
+    ) -> None:
+        self.cells = [
+            item.callspec.params
+            for item in request.session.items
+            if getattr(item, "function", None) is test and hasattr(item, "callspec")
+        ]
+        self.start = start
+        self.pool = ThreadPoolExecutor(WORKERS)
+        self.futures: dict[tuple[Any, ...], Future[T]] = {}
+
+    def __call__(self, **params: Any) -> T:
+        if not self.futures:
+            for cell in self.cells or [params]:
+                self._submit(cell)
+        if self._key(params) not in self.futures:  # a cell pytest did not list up front
+            self._submit(params)
+        return self.futures[self._key(params)].result()
+
+    def _submit(self, params: dict[str, Any]) -> None:
+        future: Future[T]
+        try:
+            future = self.pool.submit(self.start(**params))
+        except Exception as exc:  # its input could not be made: that cell reports it
+            future = Future()
+            future.set_exception(exc)
+        self.futures[self._key(params)] = future
+
+    @staticmethod
+    def _key(params: dict[str, Any]) -> tuple[Any, ...]:
+        return tuple(sorted(params.items()))
+
+    def __enter__(self) -> Prefetch[T]:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+@dataclass(frozen=True)
+class Ran:
+    """A finished ``eg2scope`` process and the folder it ran in (its relative outputs)."""
+
+    cwd: Path
+    proc: subprocess.CompletedProcess[bytes]
+
+
+def eg2scope_runs(
+    request: pytest.FixtureRequest,
+    test: Callable[..., Any],
+    folders: pytest.TempPathFactory,
+    argv: Callable[..., list[str]],
+) -> Prefetch[Ran]:
+    """``Prefetch`` of one ``eg2scope argv(**params)`` process per cell, each in a new folder."""
+
+    def start(**params: Any) -> Callable[[], Ran]:
+        args, cwd = argv(**params), folders.mktemp(test.__name__[:30])
+        return lambda: Ran(cwd, eg2scope(*args, cwd=cwd))
+
+    return Prefetch(request, test, start)
 
 
 # -- decode's output ---------------------------------------------------------------------------
@@ -329,10 +406,11 @@ class Terminal:
             argv[0], argv[1:], cwd=str(cwd), dimensions=(lines, columns), env=env
         )
 
-    def read(self) -> bool:
-        """Feed what the process wrote to the screen; whether there was anything."""
-        got = False
-        while True:
+    def read(self, most_s: float = 0.2) -> bool:
+        """Feed what the process wrote to the screen (for at most ``most_s``: a live screen
+        never stops drawing); whether there was anything."""
+        got, end = False, time.monotonic() + most_s
+        while time.monotonic() < end:
             try:
                 data = self.child.read_nonblocking(65536, timeout=0.05)
             except (self.pexpect.TIMEOUT, self.pexpect.EOF):
@@ -341,6 +419,7 @@ class Terminal:
                 return got
             got = True
             self.stream.feed(data)
+        return got
 
     def text(self) -> str:
         return "\n".join(self.screen.display)

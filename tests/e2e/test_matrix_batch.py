@@ -1,15 +1,16 @@
-"""``eg2scope batch CAPTURE -o DATASET --workers 1`` on every input kind, as a real process: it
-exits 0 and the dataset holds decode's records (per bus and seq), the reference session's state
-samples and one undamaged capture row counting them."""
+"""``eg2scope batch CAPTURE -o DATASET --workers 1`` on every input kind, as a real process (a
+few at a time): it exits 0 and the dataset holds decode's records (per bus and seq), the
+reference session's state samples and one undamaged capture row counting them."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.dataset as ds
 import pytest
-from e2e_checks import eg2scope
+from e2e_checks import Prefetch, Ran, eg2scope_runs
 from e2e_inputs import IDS
 
 from analyzer.fleet import layout
@@ -19,12 +20,20 @@ def table(root: Path, name: str) -> pa.Table:
     return ds.dataset(root / name, format="parquet", partitioning="hive").to_table()
 
 
+@pytest.fixture(scope="module")
+def batches(request, inputs, tmp_path_factory) -> Iterator[Prefetch[Ran]]:
+    def argv(kind: str) -> list[str]:
+        return ["batch", str(inputs[kind]), "-o", "fleet", "--workers", "1", "--no-progress"]
+
+    with eg2scope_runs(request, test_batch_one_worker, tmp_path_factory, argv) as runs:
+        yield runs
+
+
 @pytest.mark.parametrize("kind", IDS)
-def test_batch_one_worker(kind: str, inputs, reference, tmp_path: Path) -> None:
-    out = tmp_path / "fleet"
-    proc = eg2scope("batch", str(inputs[kind]), "-o", str(out), "--workers", "1", "--no-progress",
-                    cwd=tmp_path)  # fmt: skip
-    assert proc.returncode == 0, proc.stderr.decode()
+def test_batch_one_worker(kind: str, batches, reference) -> None:
+    ran = batches(kind=kind)
+    out = ran.cwd / "fleet"
+    assert ran.proc.returncode == 0, ran.proc.stderr.decode()
     decoded = reference.decoded(kind).records
     records = table(out, layout.RECORDS)
     assert records.num_rows == len(decoded)

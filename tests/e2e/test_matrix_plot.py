@@ -1,16 +1,20 @@
 """``eg2scope plot CAPTURE --save x.rrd`` on every input kind, read back: each gripper's
 opening samples are the readings a Python-engine session tracks from decode's records (same
 frames, same millimetres), and every view of the saved blueprint shows data. As a real process
-(its default engine), and in this process on each session engine."""
+(its default engine; a few at a time), and in this process on each session engine; and the
+live demo plotted beside its own recording."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from e2e_checks import (
+    Prefetch,
+    Ran,
     Rrd,
-    eg2scope,
+    eg2scope_runs,
     empty_views,
     force_session_engine,
     opening_series,
@@ -44,12 +48,20 @@ def check_rrd(rrd: Rrd, expected: dict[str, list[tuple[int, float]]]) -> None:
     assert not empty, f"{len(empty)} views without data: {'; '.join(empty)}"
 
 
+@pytest.fixture(scope="module")
+def plots(request, inputs, tmp_path_factory) -> Iterator[Prefetch[Ran]]:
+    def argv(kind: str) -> list[str]:
+        return ["plot", str(inputs[kind]), "--save", "plot.rrd", "--no-progress"]
+
+    with eg2scope_runs(request, test_plot_process, tmp_path_factory, argv) as runs:
+        yield runs
+
+
 @pytest.mark.parametrize("kind", IDS)
-def test_plot_process(kind: str, inputs, reference, tmp_path: Path) -> None:
-    out = tmp_path / "plot.rrd"
-    proc = eg2scope("plot", str(inputs[kind]), "--save", str(out), "--no-progress", cwd=tmp_path)
-    assert proc.returncode == 0, proc.stderr.decode()
-    check_plot(out, kind, reference)
+def test_plot_process(kind: str, plots, reference) -> None:
+    ran = plots(kind=kind)
+    assert ran.proc.returncode == 0, ran.proc.stderr.decode()
+    check_plot(ran.cwd / "plot.rrd", kind, reference)
 
 
 @pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)

@@ -3,9 +3,19 @@ command as a real process (its default engine), and in this process on each sess
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import orjson
 import pytest
-from e2e_checks import eg2scope, force_session_engine, skip_unless_native, stats_of, stats_view
+from e2e_checks import (
+    Prefetch,
+    Ran,
+    eg2scope_runs,
+    force_session_engine,
+    skip_unless_native,
+    stats_of,
+    stats_view,
+)
 from e2e_inputs import CAN_IDS, IDS
 
 from analyzer.cli import main
@@ -13,16 +23,24 @@ from analyzer.cli import main
 SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
 
 
+@pytest.fixture(scope="module")
+def stats(request, inputs, tmp_path_factory) -> Iterator[Prefetch[Ran]]:
+    def argv(kind: str) -> list[str]:
+        return ["stats", str(inputs[kind]), "--format", "json"]
+
+    with eg2scope_runs(request, test_stats_process, tmp_path_factory, argv) as runs:
+        yield runs
+
+
 @pytest.mark.parametrize("kind", IDS)
-def test_stats_process_agrees_with_decode(kind: str, inputs, reference) -> None:
-    path = inputs[kind]
-    proc = eg2scope("stats", str(path), "--format", "json", cwd=path.parent)
+def test_stats_process(kind: str, stats, reference) -> None:
+    proc = stats(kind=kind).proc
     assert proc.returncode == 0, proc.stderr.decode()
     assert stats_view(orjson.loads(proc.stdout)) == stats_of(reference.decoded(kind))
 
 
 @pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
-def test_stats_on_each_engine_agrees_with_decode(
+def test_stats_on_each_engine(
     kind: str, engine: str, inputs, reference, monkeypatch, capsys
 ) -> None:
     if engine == "native":

@@ -1,20 +1,49 @@
-"""``eg2scope tui CAPTURE`` on every input kind as a user runs it: a real process in a real
-pseudo-terminal (pexpect, the screen read back through pyte) at 80x24 and 200x50. Decoded
-frames appear with their manual names whole (a name cut short ends in ``…``, never as a bare
-``CMD_`` or a shorter name that reads like a real one), and ``q`` exits 0."""
+"""``eg2scope tui CAPTURE`` on every input kind, and ``tui --demo`` live, as a user runs it: a
+real process in a real pseudo-terminal (pexpect, the screen read back through pyte) at 80x24
+and 200x50. Decoded frames appear with their manual names whole (a name cut short ends in
+``…``, never as a bare ``CMD_`` or a shorter name that reads like a real one), and ``q`` exits
+0. The terminals run a few at a time (``Prefetch``)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from e2e_checks import CMD_WORD, Terminal, manual_names
+from e2e_checks import CMD_WORD, Prefetch, Terminal, manual_names
 from e2e_inputs import EG2SCOPE, IDS, LIVE_DEMO
 
 pytest.importorskip("pexpect")
 pytest.importorskip("pyte")
 
 SIZES = {"80x24": (80, 24), "200x50": (200, 50)}
+
+
+@dataclass(frozen=True)
+class Seen:
+    screen: str  # once decoded frames are shown and the screen has settled
+    status: int | None  # after q
+
+
+def watch(argv: list[str], size: str, cwd: Path) -> Seen:
+    term = Terminal(argv, *SIZES[size], cwd=cwd)
+    try:
+        screen = term.settle(ready=lambda text: CMD_WORD.search(text) is not None)
+        return Seen(screen, term.quit("q"))
+    finally:
+        term.close()
+
+
+@pytest.fixture(scope="module")
+def terminals(request, inputs, tmp_path_factory) -> Iterator[Prefetch[Seen]]:
+    def start(kind: str, size: str) -> Callable[[], Seen]:
+        source = ["--demo"] if kind == LIVE_DEMO else [str(inputs[kind])]
+        cwd = tmp_path_factory.mktemp("tui")
+        return lambda: watch([*EG2SCOPE, "tui", *source], size, cwd)
+
+    with Prefetch(request, test_tui_in_a_terminal, start) as runs:
+        yield runs
 
 
 def cut_names(screen: str, names: set[str]) -> list[str]:
@@ -30,23 +59,14 @@ def cut_names(screen: str, names: set[str]) -> list[str]:
 
 @pytest.mark.parametrize("size", SIZES)
 @pytest.mark.parametrize("kind", [*IDS, LIVE_DEMO])
-def test_tui_in_a_terminal(kind: str, size: str, inputs, reference, tmp_path: Path) -> None:
-    columns, lines = SIZES[size]
-    if kind == LIVE_DEMO:
-        source, names = ["--demo"], manual_names()
-    else:
-        source, names = [str(inputs[kind])], reference.decoded(kind).cmd_names()
-    term = Terminal([*EG2SCOPE, "tui", *source], columns, lines, cwd=tmp_path)
-    try:
-        screen = term.settle(ready=lambda text: CMD_WORD.search(text) is not None)
-        status = term.quit("q")
-    finally:
-        term.close()
+def test_tui_in_a_terminal(kind: str, size: str, terminals, reference) -> None:
+    names = manual_names() if kind == LIVE_DEMO else reference.decoded(kind).cmd_names()
+    seen = terminals(kind=kind, size=size)
     problems = []
-    if not set(CMD_WORD.findall(screen)) & names:
+    if not set(CMD_WORD.findall(seen.screen)) & names:
         problems.append("no decoded frame's name is shown whole")
-    if cut := cut_names(screen, names):
+    if cut := cut_names(seen.screen, names):
         problems.append(f"names cut without a mark: {sorted(set(cut))}")
-    if status != 0:
-        problems.append(f"q exited {status}")
-    assert not problems, "; ".join(problems) + "; the screen:\n" + screen
+    if seen.status != 0:
+        problems.append(f"q exited {seen.status}")
+    assert not problems, "; ".join(problems) + "; the screen:\n" + seen.screen
