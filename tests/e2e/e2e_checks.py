@@ -27,10 +27,9 @@ from analyzer.model import StateSample
 from analyzer.native import available as native_decode_available
 from analyzer.session import Session, SessionOptions
 from decoders.eg2_serial import COMMANDS
-from decoders.model import Record
 from decoders.registers import REGISTERS, opening_mm
 
-sys.path.insert(0, str(ROOT / "tests" / "rerun"))  # the .rrd reader the Rerun tests use
+sys.path.append(str(ROOT / "tests" / "rerun"))  # the .rrd reader the Rerun tests use
 from rrd_helpers import Rrd, read_rrd
 
 __all__ = ["Rrd", "read_rrd"]
@@ -55,7 +54,7 @@ def eg2scope(*argv: str, cwd: Path, timeout: float = 120) -> subprocess.Complete
 
 
 T = TypeVar("T")
-WORKERS = 3  # real processes at once: each cell's own folder, pty and ports, so this is safe
+WORKERS = 3  # real processes at once (safe: each has a folder, a pty and a demo rig of its own)
 
 
 class Prefetch(Generic[T]):
@@ -229,26 +228,28 @@ def stats_view(data: dict[str, Any]) -> dict[str, Any]:
 
 
 def force_session_engine(monkeypatch: pytest.MonkeyPatch, engine: str) -> None:
-    """Every session made from here on runs on ``engine`` (``SessionOptions.engine``, the way
-    a session chooses its decoding and tracker): the commands that have no --engine of their
-    own (stats, plot, tui) run in this process on the engine a cell asks for."""
+    """Every session made from here on that leaves its engine to the session (``"auto"``)
+    runs on ``engine`` (``SessionOptions.engine``, the way a session chooses its decoding and
+    tracker): the commands that have no --engine of their own (stats, plot, tui) run in this
+    process on the engine a cell asks for, while a reference that names its engine keeps it."""
     make = Session.__init__
 
     def init(self: Session, source: Any, listeners: list[Listener], options: Any = None) -> None:
-        make(self, source, listeners, replace(options or SessionOptions(), engine=engine))
+        options = options or SessionOptions()
+        if options.engine == "auto":
+            options = replace(options, engine=engine)
+        make(self, source, listeners, options)
 
     monkeypatch.setattr(Session, "__init__", init)
 
 
-class Collector(Listener):
+class Samples(Listener):
+    """A session's state samples."""
+
     wants_states = True
 
     def __init__(self) -> None:
-        self.records: list[Record] = []
         self.samples: list[StateSample] = []
-
-    def on_records(self, records: Any) -> None:
-        self.records += list(records)
 
     def on_states(self, samples: Any) -> None:
         self.samples += list(samples)
@@ -256,9 +257,9 @@ class Collector(Listener):
 
 def python_samples(path: Path) -> list[StateSample]:
     """The state samples of a Python-engine session over ``path`` (the reference tracker)."""
-    collector = Collector()
-    run_capture(CaptureOptions(str(path), progress=False, engine="python"), [collector])
-    return collector.samples
+    kept = Samples()
+    run_capture(CaptureOptions(str(path), progress=False, engine="python"), [kept])
+    return kept.samples
 
 
 def opening_series(samples: list[StateSample]) -> dict[str, list[tuple[int, float]]]:
