@@ -251,6 +251,9 @@ class Samples(Listener):
     def __init__(self) -> None:
         self.samples: list[StateSample] = []
 
+    def on_records(self, records: Any) -> None:
+        pass  # the records are decode's to give
+
     def on_states(self, samples: Any) -> None:
         self.samples += list(samples)
 
