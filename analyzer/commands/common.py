@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from decoders.model import EG2_CAN, Record
-from decoders.registry import resolve_protocol
+from decoders.registry import resolve_protocol, short_name
 
 from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..listener import Listener
@@ -167,6 +167,13 @@ class CaptureOptions:
 def open_reader(opts: CaptureOptions) -> CaptureReader:
     """The capture's reader; a usage error when the protocol option cannot apply to it."""
     reader = open_capture(opts.path, bus=opts.bus)
+    if opts.protocol not in (None, EG2_CAN) and reader.kind == "can":
+        reader.close()
+        raise UsageError(
+            f"{opts.path} is a CAN capture, decoded as CAN: --protocol "
+            f"{short_name(opts.protocol)} is for byte streams (raw serial or Modbus RTU dumps "
+            "and lines); leave it out"
+        )
     if opts.protocol == EG2_CAN and reader.kind != "can":
         reader.close()
         raise UsageError(
