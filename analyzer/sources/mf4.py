@@ -6,7 +6,8 @@ bus. eg2scope defers that import to the first .mf4 file it reads: until then the
 asammdf by ``can.io.mf4``'s own module code is refused (python-can then leaves its MF4 classes
 as it does when asammdf is not installed), and ``mf4_reader()`` reloads ``can.io.mf4`` with
 asammdf. Any other import of asammdf is left alone. ``defer()`` runs when ``analyzer`` is
-imported, before anything imports ``can``.
+imported, before anything imports ``can``; ``load()`` completes python-can's MF4 classes at
+once (a program that writes .mf4 files through python-can after importing eg2scope).
 """
 
 from __future__ import annotations
@@ -46,11 +47,18 @@ def defer() -> None:
         sys.meta_path.insert(0, _DeferAsammdf())
 
 
-def mf4_reader() -> Any:
-    """python-can's MF4Reader with asammdf loaded (its NotImplementedError when asammdf is not
-    installed)."""
+def load() -> ModuleType:
+    """python-can's ``can.io.mf4`` with asammdf loaded where it is installed: its MF4Reader
+    and MF4Writer work from now on (call it before writing a .mf4 with python-can in a
+    process that imported eg2scope first)."""
     _state["wanted"] = True
     module = importlib.import_module(_IMPORTER)
     if getattr(module, "asammdf", None) is None:
-        module = importlib.reload(module)
-    return module.MF4Reader
+        module = importlib.reload(module)  # its classes look asammdf up when called
+    return module
+
+
+def mf4_reader() -> Any:
+    """python-can's MF4Reader with asammdf loaded (its NotImplementedError when asammdf is not
+    installed)."""
+    return load().MF4Reader
