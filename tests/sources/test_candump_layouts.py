@@ -6,9 +6,11 @@ a file that is no candump log gives one short error and stops."""
 
 from __future__ import annotations
 
+import gzip
 import random
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -20,19 +22,31 @@ from capture_helpers import (
     sample_frames,
     write_layout,
 )
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from analyzer.sources.can_files import GIVE_UP, CandumpReader
 
 KEYS = ("bus", "protocol", "kind", "index", "direction", "device", "code", "name", "fields", "raw")
 
 
+@contextmanager
+def tz(zone: str) -> Iterator[None]:
+    """The process's local time zone, for the C library too (both engines' mktime)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TZ", zone)
+        time.tzset()
+        try:
+            yield
+        finally:
+            mp.undo()
+            time.tzset()
+
+
 @pytest.fixture
-def central_european_time(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    monkeypatch.setenv("TZ", TZ)
-    time.tzset()
-    yield
-    monkeypatch.undo()
-    time.tzset()
+def central_european_time() -> Iterator[None]:
+    with tz(TZ):
+        yield
 
 
 def _same_frames(layout: list[dict], original: list[dict]) -> None:
@@ -208,3 +222,53 @@ def test_only_log_lines_are_split_for_parallel_decoding(tmp_path: Path) -> None:
     for stamps in ("", "a", "d"):
         path = write_layout(tmp_path / f"layout-{stamps}.log", frames, stamps)
         assert not CandumpReader(path).splittable
+
+
+# -- both engines on generated logs in every layout ---------------------------------------------
+
+_STAMPS = st.sampled_from(
+    ["", "(000.{:06d}) ", "({:010d}.000000) ", "(2021-02-19 13:48:24.{:06d}) "]
+)
+_CHANNELS = st.sampled_from(["can0", "vcan1", "can-0", "can.1"])
+
+
+@st.composite
+def _layout_line(draw: st.DrawFn) -> str:
+    stamp = draw(_STAMPS).format(draw(st.integers(0, 999_999)))
+    chan = draw(_CHANNELS)
+    what = draw(st.integers(0, 9))
+    if what == 0:
+        return f"{stamp}{chan}  ERROR"
+    if what == 1:
+        return draw(st.sampled_from([*BAD_LAYOUT_LINES, "junk", "\terror-counter{1}"]))
+    ident = draw(st.sampled_from(["123", "0C8", "04FF0001", "01180001", "20000004", "7FF"]))
+    fd = what == 2
+    data = draw(st.binary(max_size=64 if fd else 8))
+    length = f"[{len(data):02d}]" if fd else f" [{len(data)}]"
+    tail = draw(st.sampled_from(["", "   ERRORFRAME", "   '....'"]))
+    if what == 3:
+        return f"{stamp}{chan}  {ident}  {length}  remote request"
+    if what == 4:  # an -L line among the others
+        return f"({draw(st.integers(0, 10**10))}.5) {chan} {ident}#{data.hex().upper()}"
+    return f"{stamp}{chan}  {ident}  {length}  {' '.join(f'{b:02X}' for b in data)}{tail}"
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    lines=st.lists(_layout_line(), min_size=1, max_size=40),
+    ending=st.sampled_from(["\n", "\r\n", "\r"]),
+    cut=st.integers(0, 12),
+    gz=st.booleans(),
+)
+def test_generated_logs_decode_the_same_with_both_engines(
+    tmp_path: Path, lines: list[str], ending: str, cut: int, gz: bool
+) -> None:
+    body = ending.join(lines).encode() + ending.encode()
+    body = body[: len(body) - cut] if cut < len(body) else body
+    path = tmp_path / ("generated.txt.gz" if gz else "generated.txt")
+    path.write_bytes(gzip.compress(body, mtime=0) if gz else body)
+    with tz(TZ):
+        for fmt in ("jsonl", "text"):
+            decode_both(path, fmt=fmt)
