@@ -9,7 +9,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from decoders.model import EG2_CAN, Record
+from decoders.model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Record
 from decoders.registry import resolve_protocol, short_name
 
 from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
@@ -167,7 +167,7 @@ class CaptureOptions:
 def open_reader(opts: CaptureOptions) -> CaptureReader:
     """The capture's reader; a usage error when the protocol option cannot apply to it."""
     reader = open_capture(opts.path, bus=opts.bus)
-    if opts.protocol not in (None, EG2_CAN) and reader.kind == "can":
+    if opts.protocol in (EG2_SERIAL, MODBUS_RTU) and reader.kind == "can":
         reader.close()
         raise UsageError(
             f"{opts.path} is a CAN capture, decoded as CAN: --protocol "
