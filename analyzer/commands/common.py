@@ -87,17 +87,19 @@ def add_protocol_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="NAME",
         help="byte-stream protocol: serial (EB 90 / EE 16 frames), modbus (Modbus RTU) or "
-        "auto (default: detected from the bytes). CAN is chosen by the file: CAN captures "
-        "are always decoded as CAN.",
+        "auto (default: detected from the bytes; decode hints when the one given finds fewer "
+        "frames). CAN is chosen by the file: CAN captures are always decoded as CAN, and "
+        "serial or modbus on one is a usage error.",
     )
 
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "file",
-        help="capture to read: candump -L .log (also .log.gz), python-can "
-        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
-        "serial bytes",
+        help="capture to read, its format told by its content whatever its name: a candump "
+        "log in any layout, a PCAN trace (.trc, 1.0-2.1), Vector .asc/.blf, python-can .csv, "
+        "ASAM .mf4, an eg2scope .mcap recording (text logs also .gz), or any other file as raw "
+        "serial bytes (.gz too)",
     )
     add_protocol_argument(parser)
     parser.add_argument(
