@@ -34,9 +34,11 @@ TRC_VERSION = b";$FILEVERSION"
 
 def head(path: str | os.PathLike[str]) -> bytes:
     """The first HEAD_SIZE bytes (decompressed for a ``.gz`` name; what a damaged one gives
-    before the damage); empty when the file cannot be read."""
+    before the damage); empty when the file cannot be read or is no regular file."""
     p = Path(path)
     try:
+        if not p.is_file():  # a FIFO must not be read twice (nor a device): its name decides
+            return b""
         if p.suffix.lower() == ".gz":
             data = b""
             with gzip.open(p, "rb") as f:

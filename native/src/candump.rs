@@ -1040,8 +1040,12 @@ fn set_channel(frame: &mut CanFrame, chan: &str) {
 }
 
 /// sniff.py `head`: the first HEAD_SIZE bytes (decompressed for a `.gz` name; what a damaged
-/// one gives before the damage); empty when the file cannot be read.
+/// one gives before the damage); empty when the file cannot be read or is no regular file.
 pub fn first_bytes(path: &Path) -> Vec<u8> {
+    // a FIFO must not be read twice (nor a device): its name decides
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return Vec::new();
+    }
     let Ok(file) = File::open(path) else {
         return Vec::new();
     };

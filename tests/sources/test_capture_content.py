@@ -6,9 +6,11 @@ padded at its end is complete and a cut one is not; ``--protocol`` says when it 
 from __future__ import annotations
 
 import gzip
+import os
 import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import can
@@ -163,3 +165,19 @@ def test_a_byte_protocol_on_a_can_capture_is_a_usage_error(
             assert "is a CAN capture" in err and "--protocol serial is for byte streams" in err
     else:  # a mixed recording holds byte streams too: the protocol applies to them
         assert decode(path, "python", "--protocol", "serial")[0] in (0, 3)
+
+
+def test_a_fifo_is_read_by_its_name_and_read_once(tmp_path: Path) -> None:
+    """Content cannot be looked at in a FIFO without losing it: its name decides."""
+    want = decode_both(CAPTURES / "can_pick_place.log")
+    for engine in ENGINES:
+        fifo = tmp_path / f"live-{engine}.log"
+        os.mkfifo(fifo)
+        writer = threading.Thread(target=lambda f=fifo: f.write_bytes(CAN_LOG_BYTES), daemon=True)
+        writer.start()
+        code, text, err = decode(fifo, engine)
+        writer.join(10)
+        assert (code, text) == want[:2], err
+
+
+CAN_LOG_BYTES = (CAPTURES / "can_pick_place.log").read_bytes()
