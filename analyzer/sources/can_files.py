@@ -1,4 +1,5 @@
-"""CAN capture files as CanFrames: candump -L logs and everything python-can's LogReader reads.
+"""CAN capture files as CanFrames: candump logs in every layout, PCAN traces, and what python-can's
+LogReader reads.
 
 Every reader has the same shape: opened on a path (a missing file raises at once), a context
 manager, an iterable of :class:`~decoders.model.CanFrame` (iterate once), and ``errors``: the
@@ -8,19 +9,23 @@ line. ``warnings`` holds notes that are not damage (relative timestamps, an unfi
 ``frames`` counts the frames yielded and ``tell()`` gives the byte position for progress bars
 where the format allows.
 
-candump logs get a parser of their own (:class:`CandumpReader`): python-can's
-``CanutilsLogReader`` builds a ``can.Message`` per line at about 200k lines/s, which alone would
-eat the pipeline's budget; this one does about 1M lines/s and also reads what candump writes
-and python-can does not (remote DLCs ``123#R5``, the DLC 9-15 suffix ``#..._F``, error frame
-payloads). The other formats go through python-can (:class:`PythonCanFileReader`); their text
-forms (.asc, .trc, .csv) line by line through ``can_lines``, so no line is skipped in silence.
+candump logs get a reader of their own (:class:`CandumpReader`, the line grammar in
+``candump``): python-can's ``CanutilsLogReader`` builds a ``can.Message`` per line at about
+200k lines/s, which alone would eat the pipeline's budget; this one does about 1M lines/s and
+reads every layout candump writes (python-can reads -L only, without remote DLCs, DLC
+suffixes or error frame payloads). PCAN traces too (:class:`TrcReader`, ``pcan_trc``: python-
+can gives up on some versions). The other formats go through python-can
+(:class:`PythonCanFileReader`); their text forms (.asc, .csv) line by line through
+``can_lines``, so no line is skipped in silence.
 
 Text files may start with a UTF-8 byte order mark and end their lines with LF, CRLF or CR
-alone. A last line cut short (no line end) is reported as truncated and never read as a frame.
+alone. A last line without its line end is a frame when it is whole (its stated length
+matches); one that may be cut short is reported as truncated and never read as a frame. A
+file whose first lines hold no frame is no log of its kind: one error says so.
 
-``open_can_file(path)`` chooses by suffix (``CAN_READERS``); ``.gz`` compressed files of the
-formats python-can can read from a stream are read too (``trace.asc.gz``), the others
-(``.mf4.gz``) are refused in words.
+``open_can_file(path)`` chooses by content (``sniff``), else by suffix (``SUFFIX_FORMATS``);
+``.gz`` compressed files of the formats that can be read from a stream are read too
+(``trace.asc.gz``), the others (``.mf4.gz``) are refused in words.
 """
 
 from __future__ import annotations
@@ -302,9 +307,13 @@ class TrcReader(_TextLogReader):
                     except ValueError as exc:
                         self._error(f"line {lineno}: {exc}")
                     continue
-                try:
-                    if layout is None:
+                if layout is None:
+                    try:
                         layout = header.layout()
+                    except ValueError as exc:  # a version of the format we do not know
+                        self._error(f"cannot read this trace: {exc}")
+                        return
+                try:
                     frame = pcan_trc.parse_message(text, header, layout)
                 except ValueError as exc:
                     if self._bad(lineno, line, exc):

@@ -11,6 +11,7 @@ from typing import Any
 import can
 import pytest
 
+from analyzer.sources import mf4
 from analyzer.sources.can_files import (
     CAN_READERS,
     MAX_ERRORS,
@@ -20,7 +21,6 @@ from analyzer.sources.can_files import (
     is_can_file,
     open_can_file,
 )
-from analyzer.sources import mf4
 from analyzer.sources.can_message import message_to_frame
 from decoders.model import CanFrame
 
