@@ -61,10 +61,10 @@ def _grippers(path: Path, size: tuple[int, int], expected: int) -> tuple[int, di
                 panel = app.query_one(DevicePanel)
                 await _until(pilot, lambda: len(panel.rows) >= 2)
                 rows = {r.device: r.values["opening"] for r in panel.rows}
-                # let the row selections the last batches posted be handled before the app
-                # quits (app.row_selected must not run after the screens are gone)
-                await pilot.pause(0.5)
-                return app.store.count, rows
+                count = app.store.count
+                await pilot.press("q")  # as a user quits: the session stopped, then the app
+                await _until(pilot, lambda: not app.is_running)
+                return count, rows
         finally:
             if app.session is not None:
                 app.session.stop()
