@@ -1,3 +1,7 @@
 """eg2scope: the analyzer application (sources, pipeline, sinks, CLI, TUI, simulator)."""
 
+from .sources.mf4 import defer as _defer_asammdf
+
 __version__ = "0.1.0"
+
+_defer_asammdf()  # python-can would import asammdf (1-2 s) for .mf4 files at `import can`

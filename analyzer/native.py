@@ -8,14 +8,17 @@ that), so it is used automatically where it applies:
 
 - the extension is installed (``pip install`` builds it when a Rust toolchain is there; without
   one the package installs in pure Python, and ``eg2scope --version`` says so);
-- the capture is a candump ``.log`` / ``.log.gz`` or a raw byte dump (``.gz`` too), a regular
-  file (a FIFO cannot be opened twice);
+- the capture is a candump log (any layout candump writes, plain or ``.gz``) or a raw byte
+  dump (``.gz`` too), a regular file (a FIFO cannot be opened twice);
 - ``--format`` is jsonl, csv, text or parquet (the core builds the Arrow columns:
   analyzer/native_parquet.py), and there is no ``--speed`` (a timed replay).
 
-Everything else (python-can's binary formats, recordings, live taps, the TUI) stays with the
-Python decoders, the readable reference. ``--engine python`` forces the Python engine,
-``--engine native`` the native one (a usage error saying why when it cannot be used).
+Other CAN captures (PCAN traces, python-can's formats, CAN recordings) are read in Python and
+decoded by the session, natively where the core is built (analyzer/batches.py); byte streams of
+recordings, live taps and the TUI stay with the Python decoders, the readable reference.
+``--engine python`` forces the Python engine, ``--engine native`` the native one: the core's
+own decode where it applies, the session's native decoding for the other CAN captures, a usage
+error saying why for the rest.
 """
 
 from __future__ import annotations
@@ -86,7 +89,7 @@ def ineligible(reader: CaptureReader, fmt: str, speed: float | None, device: int
     path = reader.path
     if isinstance(reader, CanLogReader):
         if not isinstance(getattr(reader, "_reader", None), CandumpReader):
-            return f"{path.name}: the native core reads CAN captures in candump -L .log format only"
+            return f"{path.name}: the native core reads candump logs, not this CAN format"
     elif not isinstance(reader, RawBytesReader | GzipBytesReader):
         return f"{path.name}: the native core does not read this kind of capture"
     if not path.is_file():
@@ -110,9 +113,9 @@ def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: boo
         if not why and args.format != "jsonl" and args.output in (None, "-"):
             why = _text_stdout_differs()
         if why:
-            if args.engine == "native":
+            if args.engine == "native" and not _session_decodes(reader):
                 raise UsageError(f"--engine native: {why}; use --engine python or auto")
-            return None
+            return None  # the Python engine, or the session's native CAN decoding
         if colour is None:  # stdout: coloured as the text listener would decide
             from .sinks.text import use_colour
 
@@ -121,10 +124,10 @@ def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: boo
         try:
             run = open_run(opts, args.format, colour and args.format == "text", args.absolute_time)
         except _native.Unsupported as exc:  # the core's own word: only Python reads this
-            if args.engine == "native":
+            if args.engine == "native" and not _session_decodes(reader):
                 raise UsageError(f"--engine native: {exc}; use --engine python or auto") from None
             run = None
-        if run is None and args.engine == "native":
+        if run is None and args.engine == "native" and not _session_decodes(reader):
             raise UsageError(f"--engine native: the native core does not support {opts.path}")
     except BaseException:
         reader.close()
@@ -132,6 +135,14 @@ def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: boo
     if run is not None:
         reader.close()
     return run
+
+
+def _session_decodes(reader: CaptureReader) -> bool:
+    """Whether the session decodes this capture natively when the core's own decode cannot:
+    CAN frames read in Python (analyzer/batches.py `session_engine`)."""
+    from .batches import native_session_available
+
+    return reader.kind == "can" and native_session_available()
 
 
 def _text_stdout_differs() -> str:

@@ -14,7 +14,7 @@ The joins are checked on the state that matters, and any doubt means one piece:
 - the records a part decoded in its overrun must equal, one for one, the first records the next
   part decoded after its warm-up (so the next part's warm-up reached the same state);
 - consecutive parts must meet exactly (no record lost or doubled at the boundary).
-Only raw byte dumps and uncompressed candump logs are split; everything else is one piece.
+Only raw byte dumps and uncompressed candump -L logs are split; everything else is one piece.
 
 No waste: a part's output is kept in memory only until its turn (at most ``WINDOW`` parts
 ahead of the one being written), never copied through temporary files. The parent process
@@ -134,7 +134,8 @@ def reader_kind(reader: Any) -> str:
     """ "bytes", "candump" or "" (not splittable) for a capture reader."""
     if isinstance(reader, RawBytesReader):
         return "bytes"
-    if isinstance(getattr(reader, "_reader", None), CandumpReader):
+    inner = getattr(reader, "_reader", None)
+    if isinstance(inner, CandumpReader) and inner.splittable:  # -L lines: Unix time each
         return "candump"
     return ""
 

@@ -28,6 +28,19 @@ ALIASES: dict[str, str] = {
 }
 
 
+#: a protocol in words, for messages
+PROTOCOL_WORDS: dict[str, str] = {
+    EG2_SERIAL: "EG2 serial",
+    MODBUS_RTU: "Modbus RTU",
+    EG2_CAN: "CAN",
+}
+
+
+def short_name(protocol: str) -> str:
+    """The shortest name ``--protocol`` takes for a protocol (``serial`` for eg2-serial)."""
+    return next(alias for alias, name in ALIASES.items() if name == protocol)
+
+
 def resolve_protocol(name: str) -> str:
     """A protocol name or alias to its canonical name; ValueError lists the choices."""
     try:
@@ -38,14 +51,21 @@ def resolve_protocol(name: str) -> str:
         ) from None
 
 
+def valid_frames(sample: bytes) -> dict[str, int]:
+    """How many valid frames each byte-stream decoder finds in a sample of a line."""
+    counts = {}
+    for name, cls in STREAM_DECODERS.items():
+        dec = cls()
+        records = dec.feed(Chunk(sample)) + dec.finish()
+        counts[name] = sum(1 for r in records if r.ok)
+    return counts
+
+
 def detect_protocol(sample: bytes) -> str | None:
     """Which byte-stream protocol a sample of a line holds: the one that finds the most
     valid frames in it (None if neither finds any)."""
     best, best_count = None, 0
-    for name, cls in STREAM_DECODERS.items():
-        dec = cls()
-        records = dec.feed(Chunk(sample)) + dec.finish()
-        count = sum(1 for r in records if r.ok)
+    for name, count in valid_frames(sample).items():
         if count > best_count:
             best, best_count = name, count
     return best

@@ -9,8 +9,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from decoders.model import EG2_CAN, Record
-from decoders.registry import resolve_protocol
+from decoders.model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Record
+from decoders.registry import resolve_protocol, short_name
 
 from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..listener import Listener
@@ -87,17 +87,19 @@ def add_protocol_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="NAME",
         help="byte-stream protocol: serial (EB 90 / EE 16 frames), modbus (Modbus RTU) or "
-        "auto (default: detected from the bytes). CAN is chosen by the file: CAN captures "
-        "are always decoded as CAN.",
+        "auto (default: detected from the bytes; decode hints when the one given finds fewer "
+        "frames). CAN is chosen by the file: CAN captures are always decoded as CAN, and "
+        "serial or modbus on one is a usage error.",
     )
 
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "file",
-        help="capture to read: candump -L .log (also .log.gz), python-can "
-        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
-        "serial bytes",
+        help="capture to read, its format told by its content whatever its name: a candump "
+        "log in any layout, a PCAN trace (.trc, 1.0-2.1), Vector .asc/.blf, python-can .csv, "
+        "ASAM .mf4, an eg2scope .mcap recording (text logs also .gz), or any other file as raw "
+        "serial bytes (.gz too)",
     )
     add_protocol_argument(parser)
     parser.add_argument(
@@ -167,6 +169,13 @@ class CaptureOptions:
 def open_reader(opts: CaptureOptions) -> CaptureReader:
     """The capture's reader; a usage error when the protocol option cannot apply to it."""
     reader = open_capture(opts.path, bus=opts.bus)
+    if opts.protocol in (EG2_SERIAL, MODBUS_RTU) and reader.kind == "can":
+        reader.close()
+        raise UsageError(
+            f"{opts.path} is a CAN capture, decoded as CAN: --protocol "
+            f"{short_name(opts.protocol)} is for byte streams (raw serial or Modbus RTU dumps "
+            "and lines); leave it out"
+        )
     if opts.protocol == EG2_CAN and reader.kind != "can":
         reader.close()
         raise UsageError(

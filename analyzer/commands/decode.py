@@ -6,11 +6,16 @@ import argparse
 import sys
 from typing import IO, Any
 
+from decoders.registry import PROTOCOL_WORDS, short_name, valid_frames
+
 from .. import native
 from ..errors import UsageError
 from ..listener import Listener, make_listener
 from ..outfile import OutputError, output_stream
+from ..pipeline import DETECT_BYTES
 from ..session import Session
+from ..sources import sniff
+from ..sources.capture import CaptureReader, GzipBytesReader, RawBytesReader
 from .common import (
     CaptureOptions,
     add_input_arguments,
@@ -90,10 +95,10 @@ def add_subparser(sub: Any) -> None:
         "--engine",
         choices=native.ENGINES,
         default="auto",
-        help="auto: the native core where it applies (candump .log and raw dumps to jsonl, csv, "
-        "text or parquet, byte-identical output), else Python (default); python: the Python "
-        "decoders "
-        "(and --jobs); native: the native core, a usage error where it cannot be used. "
+        help="auto: the native core where it applies (candump logs and raw dumps to jsonl, "
+        "csv, text or parquet, byte-identical output; other CAN captures are read in Python "
+        "and decoded natively), else Python (default); python: the Python decoders (and "
+        "--jobs); native: the native core, a usage error where it cannot be used. "
         "'eg2scope --version' says whether the native core is built",
     )
     parser.set_defaults(func=run)
@@ -123,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--format parquet writes a binary file: give -o FILE.parquet")
     opts = CaptureOptions.from_args(args)
     reader = open_reader(opts)  # opened first: a missing input must not touch the output
+    hint = protocol_hint(opts, reader)
+    if hint:
+        print(f"eg2scope: {opts.path}: {hint}", file=sys.stderr)
     nrun = native.open_for(args, opts, reader, text_colour(args))
     if nrun is not None:  # the native core decodes it (analyzer/native.py)
         with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
@@ -143,6 +151,25 @@ def run(args: argparse.Namespace) -> int:
         session, reader = run_capture(opts, [listener], reader)
         raise_output_failure(session, args.output)
     return finish_capture(opts.path, session, reader)
+
+
+def protocol_hint(opts: CaptureOptions, reader: CaptureReader) -> str:
+    """When ``--protocol`` names a byte protocol that finds fewer valid frames in the start of
+    a raw dump than another one: a hint naming the other ("" when the choice looks right).
+    The dump is decoded as asked."""
+    forced = opts.protocol
+    if forced is None or not isinstance(reader, RawBytesReader | GzipBytesReader):
+        return ""
+    counts = valid_frames(sniff.head(opts.path)[:DETECT_BYTES])
+    best = max(counts, key=lambda name: counts[name])
+    if forced not in counts or counts[best] <= counts[forced]:
+        return ""
+    found = f"{counts[forced]} valid frames" if counts[forced] else "no valid frame"
+    return (
+        f"hint: --protocol {short_name(forced)} finds {found} in the first {DETECT_BYTES} "
+        f"bytes; detection finds {counts[best]} {PROTOCOL_WORDS[best]} frames there: leave "
+        f"--protocol out, or give --protocol {short_name(best)}"
+    )
 
 
 def raise_output_failure(session: Session, path: str | None) -> None:

@@ -1,4 +1,5 @@
-"""CAN capture files as CanFrames: candump -L logs and everything python-can's LogReader reads.
+"""CAN capture files as CanFrames: candump logs in every layout, PCAN traces, and what python-can's
+LogReader reads.
 
 Every reader has the same shape: opened on a path (a missing file raises at once), a context
 manager, an iterable of :class:`~decoders.model.CanFrame` (iterate once), and ``errors``: the
@@ -8,19 +9,23 @@ line. ``warnings`` holds notes that are not damage (relative timestamps, an unfi
 ``frames`` counts the frames yielded and ``tell()`` gives the byte position for progress bars
 where the format allows.
 
-candump logs get a parser of their own (:class:`CandumpReader`): python-can's
-``CanutilsLogReader`` builds a ``can.Message`` per line at about 200k lines/s, which alone would
-eat the pipeline's budget; this one does about 1M lines/s and also reads what candump writes
-and python-can does not (remote DLCs ``123#R5``, the DLC 9-15 suffix ``#..._F``, error frame
-payloads). The other formats go through python-can (:class:`PythonCanFileReader`); their text
-forms (.asc, .trc, .csv) line by line through ``can_lines``, so no line is skipped in silence.
+candump logs get a reader of their own (:class:`CandumpReader`, the line grammar in
+``candump``): python-can's ``CanutilsLogReader`` builds a ``can.Message`` per line at about
+200k lines/s, which alone would eat the pipeline's budget; this one does about 1M lines/s and
+reads every layout candump writes (python-can reads -L only, without remote DLCs, DLC
+suffixes or error frame payloads). PCAN traces too (:class:`TrcReader`, ``pcan_trc``: python-
+can gives up on some versions). The other formats go through python-can
+(:class:`PythonCanFileReader`); their text forms (.asc, .csv) line by line through
+``can_lines``, so no line is skipped in silence.
 
 Text files may start with a UTF-8 byte order mark and end their lines with LF, CRLF or CR
-alone. A last line cut short (no line end) is reported as truncated and never read as a frame.
+alone. A last line without its line end is a frame when it is whole (its stated length
+matches); one that may be cut short is reported as truncated and never read as a frame. A
+file whose first lines hold no frame is no log of its kind: one error says so.
 
-``open_can_file(path)`` chooses by suffix (``CAN_READERS``); ``.gz`` compressed files of the
-formats python-can can read from a stream are read too (``trace.asc.gz``), the others
-(``.mf4.gz``) are refused in words.
+``open_can_file(path)`` chooses by content (``sniff``), else by suffix (``SUFFIX_FORMATS``);
+``.gz`` compressed files of the formats that can be read from a stream are read too
+(``trace.asc.gz``), the others (``.mf4.gz``) are refused in words.
 """
 
 from __future__ import annotations
@@ -28,19 +33,19 @@ from __future__ import annotations
 import binascii
 import gzip
 import io
-import itertools
 import logging
 import os
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import IO, TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from decoders.model import CanFrame
 
 from ..errors import UsageError
 from ..lifecycle import Closing
+from . import candump, pcan_trc, sniff
 from .can_lines import FORMATS, LineFeed, next_noted
 from .can_message import message_to_frame
 
@@ -48,14 +53,8 @@ if TYPE_CHECKING:  # python-can is imported when one of its formats is read: 0.1
     import can
 
 MAX_ERRORS = 100  # errors listed per file; ``bad_lines`` counts them all
-READ_BUFFER = 1 << 20
-HEAD_SIZE = 1 << 16  # bytes looked at for a byte order mark and the line ends
-BOM = b"\xef\xbb\xbf"
-
-CAN_ERR_FLAG = 0x20000000  # SocketCAN: error frame; the identifier carries the error class
-CAN_RTR_FLAG = 0x40000000  # SocketCAN: remote frame; never printed by candump (it writes "#R")
-CAN_EFF_FLAG = 0x80000000  # SocketCAN: extended frame (some tools print it)
-CAN_EFF_MASK = 0x1FFFFFFF
+READ_BUFFER = candump.READ_BUFFER
+CAN_EFF_MASK = candump.CAN_EFF_MASK
 
 
 class CanFileReader(Protocol):
@@ -120,58 +119,13 @@ class _FileReaderBase(Closing):
             self.warnings.append(text)
 
 
-def byte_lines(f: IO[bytes]) -> Iterator[bytes]:
-    """The lines of a binary text file, each ending in b"\\n" but a cut last one: without its
-    UTF-8 byte order mark, and split at lone CRs when the file ends its lines that way. A read
-    error (a cut .gz) is raised after the lines read before it."""
-    head = b""
-    error: BaseException | None = None
-    read1 = getattr(f, "read1", f.read)  # read1: a cut .gz keeps what it gave before the cut
-    try:
-        while len(head) < HEAD_SIZE and (block := read1(HEAD_SIZE - len(head))):
-            head += block
-    except (OSError, EOFError, zlib.error) as exc:
-        error = exc
-    if head.startswith(BOM):
-        head = head[len(BOM) :]
-    if b"\n" not in head and b"\r" in head:
-        lines: Iterator[bytes] = _cr_lines(head, f if error is None else io.BytesIO())
-    elif error is not None or not head:
-        lines = io.BytesIO(head)
-    else:
-        if not head.endswith(b"\n"):
-            head += f.readline()
-        lines = itertools.chain(io.BytesIO(head), f)
-    yield from lines
-    if error is not None:
-        raise error
+class _TextLogReader(_FileReaderBase):
+    """A text log read line by line here (candump, PCAN trace): plain, gzip compressed (by
+    the suffix) or a byte range of a plain file; ``bad_lines`` counts the lines that are no
+    frames. A file whose first GIVE_UP bad lines come before any frame is no log of the kind:
+    one error says so ("does not look like a candump log") and reading stops."""
 
-
-def _cr_lines(head: bytes, f: IO[bytes]) -> Iterator[bytes]:
-    rest = head
-    while True:
-        block = f.read(READ_BUFFER)
-        lines = (rest + block).split(b"\r")
-        rest = lines.pop()
-        for line in lines:
-            yield line + b"\n"
-        if not block:
-            break
-    if rest:
-        yield rest
-
-
-class CandumpReader(_FileReaderBase):
-    """candump -L log lines: ``(1600000000.123456) can0 04FF0001#0000F401F401``.
-
-    Standard (3 hex digits) and extended (8) identifiers, remote frames ``123#R`` / ``123#R5``,
-    error frames (CAN_ERR_FLAG 0x20000000 in the identifier: ``is_error``, the identifier
-    keeps the error class), CAN FD ``123##<flags><data>``, the classic DLC 9-15 suffix
-    ``123#1122334455667788_F``, and the direction flag python-can appends (`` R`` / `` T``).
-    Blank lines and ``#`` comments are skipped; any other line that does not parse (an
-    identifier wider than 29 bits, a last line cut short, ...) is counted in ``bad_lines``,
-    listed in ``errors`` ("line N: cannot parse: ...") and skipped.
-    """
+    what = "log"
 
     def __init__(
         self, path: str | os.PathLike[str], byte_range: tuple[int, int] | None = None
@@ -182,7 +136,7 @@ class CandumpReader(_FileReaderBase):
         self.bad_lines = 0
         if is_gzip(self.path):
             if byte_range is not None:
-                raise ValueError("a byte range of a compressed candump log cannot be read")
+                raise ValueError(f"a byte range of a compressed {self.what} cannot be read")
             self._file = gzip.open(self.path, "rb")  # noqa: SIM115
         elif byte_range is not None:
             lo, hi = byte_range
@@ -191,18 +145,78 @@ class CandumpReader(_FileReaderBase):
                 self._file = io.BytesIO(f.read(hi - lo))
         else:
             self._file = open(self.path, "rb", buffering=READ_BUFFER)  # noqa: SIM115
+        self._lines = candump.ByteLines(self._file)
+        self._held: list[str] | None = []  # errors before the first frame
+        self._first_bad = b""
+
+    def _bad(self, lineno: int, line: bytes, exc: BaseException) -> bool:
+        """Report a line that is no frame; True when the file is no log and reading stops."""
+        self.bad_lines += 1
+        why = candump.reason(exc) if line[-1:] == b"\n" else TRUNCATED
+        text = f"line {lineno}: cannot parse: {candump.quote(line)} ({why})"
+        held = self._held
+        if held is None:
+            self._error(text)
+            return False
+        if not held:
+            self._first_bad = line
+        held.append(text)
+        if len(held) < GIVE_UP:
+            return False
+        self.errors.append(
+            f"does not look like a {self.what}: no CAN frame in its first {GIVE_UP} lines "
+            f"(the first is {candump.quote(self._first_bad, 40)}); nothing read"
+        )
+        return True
+
+    def _framed(self) -> None:
+        """A frame was read: the errors held before it are damage in a log."""
+        held, self._held = self._held, None
+        for text in held or ():
+            self._error(text)
+
+    def _read_error(self, lineno: int, exc: BaseException) -> None:
+        self._framed()
+        self._error(f"line {lineno}: read error: {type(exc).__name__}: {exc}")
+
+
+GIVE_UP = 5  # bad lines before the first frame that make a file no log of its kind
+TRUNCATED = "truncated: the file ends in the middle of this line"
+_DIRECTIONS = frozenset({b"R", b"T", b"r", b"t"})  # python-can appends the direction
+
+
+class CandumpReader(_TextLogReader):
+    """A candump log in any layout candump writes (``candump`` module): -l/-L log files, the
+    default columns with or without ``-t`` stamps, ERROR lines.
+
+    Blank lines and ``#`` comments are skipped, and so are candump -e's explanation lines after
+    an error frame; any other line that does not parse (an identifier wider than 29 bits, a
+    last line cut short, ...) is counted in ``bad_lines``, listed in ``errors`` ("line N:
+    cannot parse: ...") and skipped. ``splittable``: the parallel decoder may split it (-L
+    lines, whose stamps are Unix time).
+    """
+
+    what = "candump log"
+
+    def __init__(
+        self, path: str | os.PathLike[str], byte_range: tuple[int, int] | None = None
+    ) -> None:
+        super().__init__(path, byte_range)
+        head = self._lines.head
+        self._clock = candump.Clock(candump.holds_deltas(head, self._lines.cr))
+        self.splittable = not self._clock.deltas and _starts_with_log_line(head)
 
     def __iter__(self) -> Iterator[CanFrame]:
-        f = self._file
-        if f is None:
+        if self._file is None:
             return
         unhex = binascii.unhexlify
         channels: dict[bytes, str] = {}
         frame_type = CanFrame
+        clock = self._clock
         lineno = 0
-        skipped = 0  # blank, comment and bad lines
+        after_error = False  # candump -e explains an error frame on TAB-indented lines
         try:
-            for lineno, line in enumerate(byte_lines(f), 1):
+            for lineno, line in enumerate(self._lines, 1):
                 # the fast path: "(stamp) channel ID#HEXDATA" with a 3- or 8-digit data frame
                 try:
                     if line[-1] != 10:  # no line end: the file was cut in this line
@@ -225,122 +239,109 @@ class CandumpReader(_FileReaderBase):
                     k = len(ident)
                     n = len(data)
                     if k == 8 and 0 <= aid <= CAN_EFF_MASK and n <= 8:
-                        yield frame_type(t, aid, data, True, False, False, False, n, channel)
-                        continue
-                    if k == 3 and 0 <= aid <= 0x7FF and n <= 8:
-                        yield frame_type(t, aid, data, False, False, False, False, n, channel)
-                        continue
-                    raise ValueError
+                        frame = frame_type(t, aid, data, True, False, False, False, n, channel)
+                    elif k == 3 and 0 <= aid <= 0x7FF and n <= 8:
+                        frame = frame_type(t, aid, data, False, False, False, False, n, channel)
+                    else:
+                        raise ValueError
                 except (ValueError, IndexError):
                     pass
-                # everything else: remote, error, FD frames, DLC suffixes, blank lines,
-                # comments and damage
+                else:
+                    if self._held is not None:
+                        self._framed()
+                    after_error = False
+                    self.frames += 1
+                    yield frame
+                    continue
+                # everything else: the default layout, remote, error and FD frames, DLC
+                # suffixes, blank lines, comments and damage
+                if after_error and line[:1] == b"\t":
+                    continue
                 try:
-                    parsed = _parse_candump(line, channels)
+                    parsed = candump.parse_line(line, channels, clock)
+                    cut = parsed is not None and line[-1:] != b"\n"
+                    if cut and not candump.is_complete(line, parsed[1]):  # type: ignore[index]
+                        raise ValueError(TRUNCATED)
                 except (ValueError, IndexError) as exc:
-                    skipped += 1
-                    self.bad_lines += 1
-                    self._error(f"line {lineno}: cannot parse: {_quote(line)} ({exc})")
+                    if self._bad(lineno, line, exc):
+                        return
                     continue
                 if parsed is None:
-                    skipped += 1
                     continue
-                yield parsed
+                if self._held is not None:
+                    self._framed()
+                frame = parsed[0]
+                after_error = frame.is_error
+                self.frames += 1
+                yield frame
+            self._framed()
         except (OSError, EOFError, zlib.error) as exc:  # a cut or damaged .gz
-            self._error(f"line {lineno + 1}: read error: {type(exc).__name__}: {exc}")
-        finally:
-            self.frames = lineno - skipped
+            self._read_error(lineno + 1, exc)
 
 
-def _quote(line: bytes) -> str:
-    text = line.decode("ascii", "replace").strip()
-    if len(text) > 80:
-        text = text[:77] + "..."
-    return repr(text)
+def _starts_with_log_line(head: bytes) -> bool:
+    """Whether a log's first line is a -L line: "(stamp) channel ID#..."."""
+    first = head.lstrip().split(b"\n", 1)[0].split()
+    return len(first) >= 3 and first[0][:1] == b"(" and b"#" in first[2]
 
 
-_HEX_DIGITS = frozenset(b"0123456789abcdefABCDEF")
-_DIRECTIONS = frozenset({b"R", b"T", b"r", b"t"})  # python-can appends the direction
+class TrcReader(_TextLogReader):
+    """A PEAK PCAN trace (.trc) of any version, 1.0 to 2.1 (``pcan_trc``): comments and the
+    ``;$`` header lines, then one message per line."""
 
+    what = "PCAN trace"
 
-def _parse_candump(line: bytes, channels: dict[bytes, str]) -> CanFrame | None:
-    """Any candump -L line: a CanFrame, None for a blank or comment line; else ValueError
-    saying what is wrong."""
-    parts = line.split()
-    if not parts or parts[0][:1] == b"#":
-        return None
-    if not line.endswith(b"\n"):
-        raise ValueError("truncated: the file ends in the middle of this line")
-    if len(parts) == 4 and parts[3] in _DIRECTIONS:
-        parts = parts[:3]
-    if len(parts) != 3:
-        raise ValueError(f"expected 3 fields, found {len(parts)}")
-    stamp, chan, body = parts
-    if stamp[:1] != b"(" or stamp[-1:] != b")":
-        raise ValueError("no (timestamp)")
-    t = float(stamp[1:-1])
-    ident, sep, payload = body.partition(b"#")
-    if not sep:
-        raise ValueError("no '#' between identifier and data")
-    if not ident or not _HEX_DIGITS.issuperset(ident) or len(ident) > 8:
-        raise ValueError(f"bad identifier {ident.decode('ascii', 'replace')!r}")
-    aid = int(ident, 16)
-    extended = len(ident) > 3
-    error = False
-    if extended:
-        if aid & CAN_RTR_FLAG:
-            raise ValueError(f"identifier {ident.decode()} does not fit in 29 bits")
-        error = bool(aid & CAN_ERR_FLAG)
-        aid &= CAN_EFF_MASK
-    elif aid > 0x7FF:
-        raise ValueError("standard identifier above 0x7FF")
-    remote = fd = False
-    if payload[:1] == b"#":  # CAN FD: "##", one flags digit (BRS, ESI: not kept), the data
-        if len(payload) < 2 or payload[1] not in _HEX_DIGITS:
-            raise ValueError("CAN FD frame without its flags digit")
-        fd = True
-        data = binascii.unhexlify(payload[2:])
-        dlc = len(data)
-    elif payload[:1] in (b"R", b"r"):  # remote frame, optional DLC digit
-        data = b""
-        dlc = int(payload[1:], 16) if len(payload) > 1 else 0
-        if not 0 <= dlc <= 15:
-            raise ValueError("bad remote DLC")
-        remote = True
-    elif b"_" in payload:  # classic frame with a DLC of 9-15: 8 data bytes and "_<dlc>"
-        hexdata, _, dlc_text = payload.partition(b"_")
-        data = binascii.unhexlify(hexdata)
-        dlc = int(dlc_text, 16)
-        if len(data) != 8 or not 9 <= dlc <= 15:
-            raise ValueError("bad DLC suffix")
-    else:
+    def __iter__(self) -> Iterator[CanFrame]:
+        header = pcan_trc.TraceHeader()
+        layout: tuple[str, ...] | None = None
+        lineno = 0
         try:
-            data = binascii.unhexlify(payload)
-        except binascii.Error as exc:
-            raise ValueError(f"bad data: {exc}") from None
-        dlc = len(data)
-    if not fd and len(data) > 8:
-        raise ValueError(f"{len(data)} data bytes in a classic CAN frame")
-    channel = channels.get(chan)
-    if channel is None:
-        channel = channels[chan] = chan.decode("ascii")
-    return CanFrame(t, aid, data, extended, remote, error, fd, dlc, channel)
+            for lineno, line in enumerate(self._lines, 1):
+                text = line.decode("ascii", "replace").strip()
+                if not text:
+                    continue
+                if text[0] == ";":
+                    try:
+                        if text[:2] == ";$" and layout is None:
+                            header.read(text)
+                    except ValueError as exc:
+                        self._error(f"line {lineno}: {exc}")
+                    continue
+                if layout is None:
+                    try:
+                        layout = header.layout()
+                    except ValueError as exc:  # a version of the format we do not know
+                        self._error(f"cannot read this trace: {exc}")
+                        return
+                try:
+                    frame = pcan_trc.parse_message(text, header, layout)
+                except ValueError as exc:
+                    if self._bad(lineno, line, exc):
+                        return
+                    continue
+                if frame is not None:
+                    self._framed()
+                    self.frames += 1
+                    yield frame
+            self._framed()
+        except (OSError, EOFError, zlib.error) as exc:  # a cut or damaged .gz
+            self._read_error(lineno + 1, exc)
 
 
 # python-can reader per suffix (the readers keep python-can's own names)
 _PYTHON_CAN_READERS: dict[str, str] = {
     ".asc": "ASCReader",
     ".blf": "BLFReader",
-    ".trc": "TRCReader",
     ".csv": "CSVReader",
     ".mf4": "MF4Reader",
 }
 _BINARY_SUFFIXES = frozenset({".blf", ".mf4"})
+_TEXT_KINDS = {".asc": "Vector ASC log", ".csv": "python-can CSV log"}
 BLF_HEADER_SIZE = 144  # FILE_HEADER_SIZE: what python-can's BLFWriter writes first
 
 
 class PythonCanFileReader(_FileReaderBase):
-    """Any format python-can reads (.asc, .blf, .trc, .csv, .mf4), as CanFrames.
+    """The formats python-can reads for us (.asc, .blf, .csv, .mf4), as CanFrames.
 
     ASC timestamps are made absolute from the file's "Begin Triggerblock" date (to the
     millisecond the format keeps); when that date cannot be parsed they stay relative and
@@ -351,21 +352,22 @@ class PythonCanFileReader(_FileReaderBase):
     writer) is detected from the file size its header states.
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], fmt: str | None = None) -> None:
+        """``fmt``: "asc", "blf", "csv" or "mf4" (what the file holds); default: its suffix."""
         super().__init__(path)
-        self.suffix = _format_suffix(self.path)
+        self.suffix = f".{fmt}" if fmt else _format_suffix(self.path)
         reader_name = _PYTHON_CAN_READERS.get(self.suffix)
         if reader_name is None:
             raise ValueError(_unsupported(self.path))
-        import can
-
-        reader_type = getattr(can, reader_name)
+        reader_type = _python_can_reader(reader_name)
         if not self.path.exists():
             raise FileNotFoundError(f"CAN capture not found: {self.path}")
         self._reader_type = reader_type
         self._kwargs: dict[str, Any] = {}
         self._feed: LineFeed | None = None
         self._relative = False
+        self._held: list[str] | None = []  # line errors before the first frame
+        self._first_bad = ""
         self._reader: Any = self._open(relative=False)
 
     def _open(self, relative: bool) -> Any:
@@ -383,7 +385,7 @@ class PythonCanFileReader(_FileReaderBase):
             self._file = open(self.path, "rb" if binary else "r", **text)  # noqa: SIM115
         source = self._file
         if not binary:
-            source = self._feed = LineFeed(self._file, FORMATS[self.suffix], self._error)
+            source = self._feed = LineFeed(self._file, FORMATS[self.suffix], self._line_error)
         try:
             return self._reader_type(source, **self._kwargs)
         except NotImplementedError as exc:  # e.g. .mf4 without asammdf
@@ -446,11 +448,39 @@ class PythonCanFileReader(_FileReaderBase):
                     break
                 self._reader = self._reader_type(feed, **self._kwargs)
         feed.finish()
+        if self._no_log():
+            return
+        for text in self._held or ():
+            self._error(text)
         if feed.read_error is not None:
             self._error(
                 f"{self.path.name}: read error after line {feed.number}: "
                 f"{_exc_text(feed.read_error)}"
             )
+
+    def _line_error(self, text: str) -> None:
+        """A line that is no frame: damage, or (before any frame) a sign the file is no log."""
+        held = self._held
+        if self.frames or held is None:
+            self._error(text)
+            return
+        if not held:
+            self._first_bad = text if len(text) <= 80 else text[:77] + "..."
+        held.append(text)
+        if len(held) >= GIVE_UP and self._feed is not None:
+            self._feed.stop = True
+
+    def _no_log(self) -> bool:
+        """Whether reading stopped because the first lines held no frame (and say so)."""
+        held = self._held
+        if held is None or len(held) < GIVE_UP:
+            return False
+        what = _TEXT_KINDS.get(self.suffix, "capture")
+        self.errors.append(
+            f"does not look like a {what}: no CAN frame in its first {GIVE_UP} lines "
+            f"(the first: {self._first_bad}); nothing read"
+        )
+        return True
 
     def _can_go_relative(self, exc: BaseException) -> bool:
         """The ASC start date is in a form python-can cannot parse: keep relative times."""
@@ -498,14 +528,21 @@ class PythonCanFileReader(_FileReaderBase):
         for level, text in notes:
             self._note(level, f"{where}: {text}")
         if not _data_match_dlc(msg):
-            self._error(
-                f"{where}: DLC {msg.dlc} but {len(msg.data)} data bytes: the frame is damaged "
-                "and not read"
-            )
+            if self._feed is not None and self._feed.cut:
+                self._error(f"{where}: {TRUNCATED} (no line end), which is not read")
+            else:
+                self._error(
+                    f"{where}: DLC {msg.dlc} but {len(msg.data)} data bytes: the frame is "
+                    "damaged and not read"
+                )
             return False
         self.frames += 1
-        if self.frames == 1 and self.suffix == ".asc" and not self._relative:
-            self._check_asc_start()
+        if self.frames == 1:
+            for text in self._held or ():
+                self._error(text)
+            self._held = None
+            if self.suffix == ".asc" and not self._relative:
+                self._check_asc_start()
         return True
 
     def _note(self, level: int, text: str) -> None:
@@ -538,8 +575,14 @@ class PythonCanFileReader(_FileReaderBase):
                 f"{self.path.name}: file truncated: its header states {stated} bytes, the file "
                 f"has {actual}; frames after the cut are lost"
             )
-        elif getattr(reader, "_tail", b""):
+        elif not _blf_padding(getattr(reader, "_tail", b"")):
             self._error(f"{self.path.name}: the last object is incomplete")
+
+
+def _blf_padding(tail: bytes) -> bool:
+    """Whether what is left after a BLF's last object is only the zero padding that aligns
+    objects to 4 bytes (a writer may pad the last container's last object too)."""
+    return len(tail) < 4 and not tail.strip(b"\0")
 
 
 def _data_match_dlc(msg: can.Message) -> bool:
@@ -561,18 +604,42 @@ def _exc_text(exc: BaseException) -> str:
     return f"{name}: {exc}"
 
 
+def _python_can_reader(name: str) -> Any:
+    import can
+
+    if name == "MF4Reader":
+        from .mf4 import mf4_reader
+
+        return mf4_reader()
+    return getattr(can, name)
+
+
 # -- choosing a reader --------------------------------------------------------------------------
 
-CAN_READERS: dict[str, type[CandumpReader] | type[PythonCanFileReader]] = {
-    ".log": CandumpReader,
-    ".asc": PythonCanFileReader,
-    ".blf": PythonCanFileReader,
-    ".trc": PythonCanFileReader,
-    ".csv": PythonCanFileReader,
-    ".mf4": PythonCanFileReader,
+#: the reader of each CAN capture format
+FORMAT_READERS: dict[str, type[_FileReaderBase]] = {
+    "candump": CandumpReader,
+    "trc": TrcReader,
+    "asc": PythonCanFileReader,
+    "blf": PythonCanFileReader,
+    "csv": PythonCanFileReader,
+    "mf4": PythonCanFileReader,
+}
+#: the format a suffix names, where the content does not tell (python-can's LogReader goes by it)
+SUFFIX_FORMATS: dict[str, str] = {
+    ".log": "candump",
+    ".trc": "trc",
+    ".asc": "asc",
+    ".blf": "blf",
+    ".csv": "csv",
+    ".mf4": "mf4",
+}
+CAN_READERS: dict[str, type[_FileReaderBase]] = {
+    suffix: FORMAT_READERS[fmt] for suffix, fmt in SUFFIX_FORMATS.items()
 }
 # read from a stream, so also gzip compressed (.mf4 needs random access)
 GZIP_READABLE = frozenset({".log", ".asc", ".blf", ".trc", ".csv"})
+GZIP_FORMATS = frozenset(SUFFIX_FORMATS[s] for s in GZIP_READABLE)
 #: every suffix a CAN capture may have, compressed ones included (".log", ".log.gz", ...)
 CAN_SUFFIXES = frozenset([*CAN_READERS, *(f"{s}.gz" for s in GZIP_READABLE)])
 
@@ -593,20 +660,35 @@ def _unsupported(path: Path) -> str:
     )
 
 
+def can_format(path: str | os.PathLike[str]) -> str | None:
+    """The CAN capture format of a file: from its content (``sniff``), else from its suffix;
+    None when it is no CAN capture."""
+    p = Path(path)
+    fmt = sniff.sniff(p)
+    if fmt in FORMAT_READERS:
+        return fmt
+    if fmt is not None:  # another kind of capture (an MCAP recording)
+        return None
+    return SUFFIX_FORMATS.get(_format_suffix(p))
+
+
 def is_can_file(path: str | os.PathLike[str]) -> bool:
     """Whether open_can_file would pick a reader for this path's suffix."""
     return _format_suffix(Path(path)) in CAN_READERS
 
 
-def open_can_file(path: str | os.PathLike[str]) -> CandumpReader | PythonCanFileReader:
-    """The reader for a CAN capture, chosen by its suffix (like python-can's LogReader)."""
+def open_can_file(path: str | os.PathLike[str]) -> Any:
+    """The reader for a CAN capture, chosen by what it holds, else by its suffix (as
+    python-can's LogReader chooses)."""
     p = Path(path)
-    suffix = _format_suffix(p)
-    reader_type = CAN_READERS.get(suffix)
-    if reader_type is None:
+    fmt = can_format(p)
+    if fmt is None:
         raise ValueError(_unsupported(p))
-    if is_gzip(p) and suffix not in GZIP_READABLE:
-        raise UsageError(compressed_unreadable(p, suffix))
+    if is_gzip(p) and fmt not in GZIP_FORMATS:
+        raise UsageError(compressed_unreadable(p, f".{fmt}"))
+    reader_type = FORMAT_READERS[fmt]
+    if reader_type is PythonCanFileReader:
+        return PythonCanFileReader(p, fmt)
     return reader_type(p)
 
 

@@ -1,4 +1,4 @@
-"""Every line of a python-can text capture (.asc, .trc, .csv) accounted for.
+"""Every line of a python-can text capture (.asc, .csv) accounted for.
 
 python-can's text readers skip what they do not understand without a word and stop at the
 first line they choke on. Fed through a :class:`LineFeed`, every line is checked instead:
@@ -9,9 +9,10 @@ first line they choke on. Fed through a :class:`LineFeed`, every line is checked
 - a line the reader raised on is reported ("line 12: cannot parse: ...") and reading resumes
   on the next line (the reader is made again and the lines that set its state, such as the
   ASC start date, are fed to it again first);
-- a last line that does not end (a file cut mid-line) is reported as truncated and never
-  given to the reader, so a cut frame is never read as a different, shorter one (a cut
-  line can look like anything, even a complete event line);
+- a last line that does not end is a frame when it is complete (``TextFormat.complete``: its
+  last field is whole, and the reader checks its data against its length); one that may be
+  cut short (a file cut mid-line) is reported as truncated and never given to the reader, so
+  a cut frame is never read as a different, shorter one;
 - what python-can logs while reading (``can.io.*``) is taken as notes on the current line,
   never printed.
 """
@@ -43,6 +44,8 @@ class TextFormat:
     resume_tail: str = ""
     #: a complete last line a writer may leave without its line end ("End TriggerBlock")
     last_line: str | None = None
+    #: a last line without its line end that cannot be the start of a longer one
+    complete: Callable[[str], bool] = lambda line: False
 
 
 _ASC_HEADER = re.compile(
@@ -55,6 +58,15 @@ _ASC_TIMESTAMP = re.compile(r"\d+\.\d+\s")
 _ASC_FRAME_SHAPED = re.compile(r"\d+\.\d+\s+(\d+\s+\S+\s+(rx|tx)\b|canfd\s)", re.IGNORECASE)
 
 
+_ASC_WHOLE_END = re.compile(r"(\s[0-9A-Fa-f]{2}|\s[dD]\s+0|\s[rR](\s+[0-9A-Fa-f])?)$")
+
+
+def _asc_complete(line: str) -> bool:
+    """A frame line that ends with a whole data byte, or a remote frame or one without data
+    (a cut one can end in half a byte: "40 0D 0" must not be read as 40 0D 00)."""
+    return bool(_ASC_FRAME_SHAPED.match(line) and _ASC_WHOLE_END.search(line))
+
+
 def _asc_known(line: str, number: int, notes: list[str]) -> bool:
     if not line or line.startswith("//") or _ASC_HEADER.match(line):
         return True
@@ -63,32 +75,20 @@ def _asc_known(line: str, number: int, notes: list[str]) -> bool:
     return bool(_ASC_TIMESTAMP.match(line)) and not _ASC_FRAME_SHAPED.match(line)
 
 
-# TRC record types python-can does not read (status, error counter, error frame, event)
-_TRC_OTHER_TYPES = frozenset({"ST", "EC", "ER", "EV", "Warng", "Error"})
-_TRC_UNSUPPORTED = re.compile(r"Unsupported type '(\w+)'")
-
-
-def _trc_known(line: str, number: int, notes: list[str]) -> bool:
-    if not line or line.startswith(";"):
-        return True
-    for note in notes:
-        if "bus info line" in note:
-            return True
-        match = _TRC_UNSUPPORTED.search(note)
-        if match and match.group(1) in _TRC_OTHER_TYPES:
-            return True
-    return False
-
-
 FORMATS: dict[str, TextFormat] = {
     ".asc": TextFormat(
         _asc_known,
         lambda line, n: bool(_ASC_STATE.match(line.strip())),
         resume_tail="\n",
         last_line="end triggerblock",
+        complete=_asc_complete,
     ),
-    ".trc": TextFormat(_trc_known, lambda line, n: line.startswith(";$")),
-    ".csv": TextFormat(lambda line, n, notes: not line or n == 1, lambda line, n: n == 1),
+    # the data (base64) are last: a cut leaves bad padding or too few bytes for the DLC
+    ".csv": TextFormat(
+        lambda line, n, notes: not line or n == 1,
+        lambda line, n: n == 1,
+        complete=lambda line: line.count(",") == 6,
+    ),
 }
 
 
@@ -113,6 +113,8 @@ class LineFeed:
         self.fmt = fmt
         self.report = report
         self.number = 0  # the last line handed out
+        self.cut = False  # that line is the last, without its line end
+        self.stop = False  # set by the owner: read no further (the file is no log)
         self.read_error: BaseException | None = None
         self._pending: str | None = None  # the last line handed out, not yet accounted for
         self._notes: list[tuple[int, str]] = []  # python-can's notes on that line: level, text
@@ -126,6 +128,8 @@ class LineFeed:
         if self._replay:
             return self._replay.pop(0)
         self._settle()
+        if self.stop:
+            raise StopIteration
         try:
             line = next(self._f)
         except (
@@ -138,16 +142,25 @@ class LineFeed:
         self.number += 1
         text = line.strip()
         if not line.endswith("\n") and text and text.lower() != self.fmt.last_line:
-            self.report(
-                f"line {self.number}: truncated: the file ends in the middle of this line "
-                f"({quote(line)}), which is not read"
-            )
+            if self.fmt.complete(text):
+                self.cut = True
+                line += "\n"
+                self._pending = line
+                self._notes = []
+                return line
+            self._truncated(line)
             raise StopIteration
         if self.fmt.sets_state(text, self.number):
             self._state_lines.append(line)
         self._pending = line
         self._notes = []
         return line
+
+    def _truncated(self, line: str) -> None:
+        self.report(
+            f"line {self.number}: truncated: the file ends in the middle of this line "
+            f"({quote(line)}), which is not read"
+        )
 
     def close(self) -> None:
         """python-can's readers close their file at the end; the owner closes the real one."""
@@ -170,6 +183,9 @@ class LineFeed:
         """The reader raised on the current line: report it. True when reading can resume
         with a new reader (False: a header or start-date line failed, or nothing to blame)."""
         line, self._pending = self._pending, None
+        if line is not None and self.cut:
+            self._truncated(line)
+            return True
         if line is None or self.fmt.sets_state(line.strip(), self.number):
             return False
         self.report(f"line {self.number}: cannot parse: {quote(line)} ({_exc_text(exc)})")
@@ -185,6 +201,9 @@ class LineFeed:
     def _settle(self) -> None:
         line, self._pending = self._pending, None
         if line is None:
+            return
+        if self.cut:  # the last line, whole-looking, gave no frame: it was cut after all
+            self._truncated(line)
             return
         notes = [text for _, text in self._notes]
         self._notes = []

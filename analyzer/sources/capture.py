@@ -1,8 +1,10 @@
-"""Capture files as a stream of pipeline Items, chosen by their full suffix (as python-can's
-LogReader chooses its readers).
+"""Capture files as a stream of pipeline Items, chosen by what they hold (``sniff``: binary
+formats by their magic, text logs by their first line), else by their full suffix (as
+python-can's LogReader chooses its readers).
 
-- CAN logs: candump -L ``.log`` and everything python-can reads (``can_files``), also gzip
-  compressed where python-can can read them from a stream (``can.log.gz``, ``trace.asc.gz``);
+- CAN logs: candump logs in every layout, PCAN traces and everything python-can reads
+  (``can_files``), also gzip compressed where they can be read from a stream (``can.log.gz``,
+  ``trace.asc.gz``);
 - eg2scope recordings: ``.mcap`` (``analyzer.recording``: the raw topics are decoded again, the
   recorded source events come back in place);
 - anything else: raw bytes of a serial line (regular serial protocol or Modbus RTU); ``.gz``:
@@ -31,7 +33,7 @@ from decoders.model import Chunk
 from ..errors import UsageError
 from ..lifecycle import Closing
 from ..model import Item, SourceEvent
-from . import can_files
+from . import can_files, sniff
 
 READ_SIZE = 1 << 16
 
@@ -183,10 +185,15 @@ def _tell(reader: Any, count: int, size: int) -> int:
 
 
 def reader_for(path: str | os.PathLike[str]) -> str:
-    """The ``"module:Class"`` of the reader for ``path``, by its longest registered suffix
-    (``.log.gz`` before ``.gz``). UsageError for a compressed file of a kind that cannot be
-    read compressed (``.mcap.gz``, ``.mf4.gz``)."""
+    """The ``"module:Class"`` of the reader for ``path``: by what it holds, else by its longest
+    registered suffix (``.log.gz`` before ``.gz``). UsageError for a compressed file of a kind
+    that cannot be read compressed (``.mcap.gz``, ``.mf4.gz``)."""
     p = Path(path)
+    held = sniff.sniff(p)
+    if held is not None:
+        if can_files.is_gzip(p) and held not in can_files.GZIP_FORMATS:
+            raise UsageError(can_files.compressed_unreadable(p, f".{held}"))
+        return CAPTURE_READERS[".mcap"] if held == "mcap" else _CAN_LOG
     suffixes = [s.lower() for s in p.suffixes]
     for i in range(len(suffixes)):
         tail = "".join(suffixes[i:])

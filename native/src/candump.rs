@@ -1,19 +1,25 @@
-//! candump -L logs as CanFrames: `(1600000000.123456) can0 04FF0001#0000F401F401`.
+//! candump logs as CanFrames, in every layout candump writes: `-l`/`-L` lines
+//! (`(1600000000.123456) can0 04FF0001#0000F401F401`), the default columns
+//! (`can0  0C8   [8]  F0 00 ...`) with or without `-ta`/`-tz`/`-td`/`-tA` stamps, ERROR lines.
 //!
-//! Mirrors analyzer/sources/can_files.py `CandumpReader` (with `byte_lines`, `_cr_lines`,
-//! `_parse_candump`, `_quote`, `_FileReaderBase._error`) and the channel naming of
-//! analyzer/sources/capture.py (`can_bus_name`, `CanLogReader`). Everything the Python does
-//! is copied, including its quirks:
+//! Mirrors analyzer/sources/candump.py (the line grammar, `ByteLines`, `Clock`,
+//! `holds_deltas`, `local_time`, `is_complete`, `quote`, `reason`), can_files.py
+//! `CandumpReader` and `_TextLogReader` (the fast path, the give-up after GIVE_UP bad lines,
+//! `_FileReaderBase._error`) and the channel naming of analyzer/sources/capture.py
+//! (`can_bus_name`, `CanLogReader`). Everything the Python does is copied, including its
+//! quirks:
 //!
 //! - a line is first tried by the Python's fast path, whose `int(ident, 16)` accepts a `0x`
 //!   prefix, a sign and underscores (`0x123456#..` is an extended frame there), then by the
-//!   general parser, whose error texts (`float()`/`int()`/`unhexlify` messages included) end
-//!   up in `errors`;
+//!   general parser, whose error texts (`float()`/`int()`/`unhexlify` messages included,
+//!   cut at 100 characters) end up in `errors`;
 //! - lines end at LF; a file whose first 64 KiB hold CRs but no LF is split at CRs;
 //! - a cut or damaged .gz yields what Python's gzip module yields before raising: every whole
 //!   line before the damage (LF files), whole 1 MiB blocks (CR files), nothing at all when the
 //!   damage is inside the line that crosses the first 64 KiB, and the whole head when the
-//!   damage is inside the first 64 KiB; then `line N: read error: Type: message`.
+//!   damage is inside the first 64 KiB; then `line N: read error: Type: message`;
+//! - -tA dates go through the C library's `mktime`, as Python's `time.mktime` does (on Unix;
+//!   elsewhere `DecodeRun::open` leaves such logs to the Python engine).
 //!
 //! The gzip container is read here (header, CRC and size checks, members, zero padding, in
 //! Python's order and words); the deflate data through flate2. A corrupt deflate stream
@@ -302,19 +308,26 @@ fn all_hex(s: &[u8]) -> bool {
     s.iter().all(|&c| c.is_ascii_hexdigit())
 }
 
-/// `_quote(line)`: the line for an error text, stripped, cut at 80 characters, repr'd.
-fn quote(line: &[u8]) -> String {
+/// candump.py `quote(line, limit)`: the line for an error text, stripped, cut at `limit`
+/// characters, repr'd.
+fn quote(line: &[u8], limit: usize) -> String {
     let text = ascii_replace(line);
     // str.strip(): Unicode whitespace; in ASCII that is bytes' whitespace and \x1c-\x1f
     let text = text.trim_matches(|c: char| matches!(c, '\t'..='\r' | '\x1c'..='\x1f' | ' '));
-    let chars: Vec<char> = text.chars().collect();
-    let text: String = if chars.len() > 80 {
-        chars[..77].iter().collect::<String>() + "..."
-    } else {
-        text.to_string()
-    };
-    str_repr(&text)
+    str_repr(&cut_chars(text, limit))
 }
+
+/// `text` cut at `limit` characters, the last three of them "..." (as the Python cuts).
+fn cut_chars(text: &str, limit: usize) -> String {
+    if text.chars().count() <= limit {
+        return text.to_string();
+    }
+    text.chars().take(limit - 3).collect::<String>() + "..."
+}
+
+/// candump.py `MAX_QUOTED`, `MAX_REASON`: characters of a bad line, and of why it is bad.
+const MAX_QUOTED: usize = 80;
+const MAX_REASON: usize = 100;
 
 /// `can_bus_name`: python-can channels are often numbers: name them the SocketCAN way.
 pub fn can_bus_name(channel: Option<&str>) -> Cow<'_, str> {
@@ -646,6 +659,8 @@ struct Lines {
     error: Option<ReadError>,
     /// CR mode: the line with its `\n`
     scratch: Vec<u8>,
+    /// the first 64 KiB, without the byte order mark (`ByteLines.head`)
+    head: Vec<u8>,
 }
 
 /// Read into `buf` (grown by up to `want` bytes) until `want` bytes or the end; the bytes read
@@ -675,7 +690,9 @@ impl Lines {
         let (_, head_error) = read_more(&mut src, &mut buf, HEAD_SIZE);
         let start = if buf.starts_with(BOM) { BOM.len() } else { 0 };
         let head = &buf[start..];
+        let head_copy = head.to_vec();
         let mut lines = Lines {
+            head: head_copy,
             cr: !head.contains(&b'\n') && head.contains(&b'\r'),
             exhausted: false,
             yield_partial: true,
@@ -791,11 +808,17 @@ impl Lines {
 
 // -- the reader -------------------------------------------------------------------------------
 
-/// candump -L log lines as CanFrames (Python `CandumpReader`): standard and extended
-/// identifiers, remote frames `123#R` / `123#R5`, error frames (CAN_ERR_FLAG in the
-/// identifier), CAN FD `123##<flags><data>`, the classic DLC 9-15 suffix `#..._F`, and the
-/// direction flag python-can appends. Blank lines and `#` comments are skipped; any other line
-/// that does not parse is counted in `bad_lines`, listed in `errors` and skipped.
+/// can_files.py `GIVE_UP`: bad lines before the first frame that make a file no candump log.
+pub const GIVE_UP: usize = 5;
+/// can_files.py `TRUNCATED`
+const TRUNCATED: &str = "truncated: the file ends in the middle of this line";
+
+/// candump logs in every layout candump writes, as CanFrames (Python `CandumpReader` over
+/// candump.py): -l/-L lines, the default columns with or without `-t` stamps, ERROR lines.
+/// Blank lines, `#` comments and candump -e's explanation lines after an error frame are
+/// skipped; any other line that does not parse is counted in `bad_lines`, listed in `errors`
+/// and skipped; a file whose first GIVE_UP bad lines come before any frame is no candump log:
+/// one error says so and reading stops.
 pub struct CandumpReader {
     pub path: PathBuf,
     lines: Option<Lines>,
@@ -807,6 +830,14 @@ pub struct CandumpReader {
     /// errors listed (MAX_ERRORS; a test may raise it to compare every error)
     pub max_errors: usize,
     lineno: u64,
+    clock: Clock,
+    /// the last frame was an error frame: TAB-indented lines after it explain it (-e)
+    after_error: bool,
+    /// errors before the first frame (None once a frame was read)
+    held: Option<Vec<String>>,
+    first_bad: Vec<u8>,
+    /// the head holds a -tA date stamp (the native core reads them on Unix only)
+    pub dated: bool,
 }
 
 /// `is_gzip`: by the suffix, as the Python chooses (not by the magic bytes).
@@ -852,14 +883,21 @@ impl CandumpReader {
     }
 
     fn with_source(path: &Path, src: Source) -> CandumpReader {
+        let lines = Lines::new(src);
+        let (deltas, dated) = holds_deltas(&lines.head, lines.cr);
         CandumpReader {
             path: path.to_path_buf(),
-            lines: Some(Lines::new(src)),
+            lines: Some(lines),
             errors: Vec::new(),
             frames: 0,
             bad_lines: 0,
             max_errors: MAX_ERRORS,
             lineno: 0,
+            clock: Clock::new(deltas),
+            after_error: false,
+            held: Some(Vec::new()),
+            first_bad: Vec::new(),
+            dated,
         }
     }
 
@@ -873,6 +911,48 @@ impl CandumpReader {
         push_error(&mut self.errors, text, self.max_errors);
     }
 
+    /// `_TextLogReader._framed`: a frame was read: the errors held before it are damage.
+    fn framed(&mut self) {
+        if let Some(held) = self.held.take() {
+            for text in held {
+                self.error(text);
+            }
+        }
+    }
+
+    /// `_TextLogReader._bad`: report a line that is no frame; true when the file is no log.
+    fn bad(&mut self, line: &[u8], why: &str) -> bool {
+        self.bad_lines += 1;
+        let why = if line.last() == Some(&b'\n') {
+            cut_chars(why, MAX_REASON)
+        } else {
+            TRUNCATED.to_string()
+        };
+        let text = format!(
+            "line {}: cannot parse: {} ({why})",
+            self.lineno,
+            quote(line, MAX_QUOTED)
+        );
+        let Some(held) = self.held.as_mut() else {
+            self.error(text);
+            return false;
+        };
+        if held.is_empty() {
+            self.first_bad = line.to_vec();
+        }
+        held.push(text);
+        if held.len() < GIVE_UP {
+            return false;
+        }
+        let text = format!(
+            "does not look like a candump log: no CAN frame in its first {GIVE_UP} lines (the \
+             first is {}); nothing read",
+            quote(&self.first_bad, 40)
+        );
+        self.errors.push(text);
+        true
+    }
+
     /// The next frame into `frame` (its buffers reused); false at the end.
     pub fn next_into(&mut self, frame: &mut CanFrame) -> bool {
         loop {
@@ -883,9 +963,11 @@ impl CandumpReader {
                 Ok(Some(line)) => line,
                 Ok(None) => {
                     self.lines = None;
+                    self.framed();
                     return false;
                 }
                 Err(e) => {
+                    self.framed();
                     let text = format!("line {}: read error: {}", self.lineno + 1, e.text);
                     push_error(&mut self.errors, text, self.max_errors);
                     self.lines = None;
@@ -894,23 +976,40 @@ impl CandumpReader {
             };
             self.lineno += 1;
             if fast_parse(line, frame) {
+                self.framed();
+                self.after_error = false;
                 self.frames += 1;
                 return true;
             }
-            match parse_candump(line, frame) {
+            if self.after_error && line.first() == Some(&b'\t') {
+                continue;
+            }
+            let parsed = match parse_line(line, frame, &mut self.clock) {
+                Ok(Some((layout, _))) if line.last() != Some(&b'\n') => {
+                    if is_complete(line, layout) {
+                        Ok(true)
+                    } else {
+                        Err(TRUNCATED.to_string())
+                    }
+                }
+                Ok(found) => Ok(found.is_some()),
+                Err(why) => Err(why),
+            };
+            match parsed {
                 Ok(true) => {
+                    self.framed();
+                    self.after_error = frame.is_error;
                     self.frames += 1;
                     return true;
                 }
                 Ok(false) => {}
                 Err(why) => {
-                    let text = format!(
-                        "line {}: cannot parse: {} ({why})",
-                        self.lineno,
-                        quote(line)
-                    );
-                    self.bad_lines += 1;
-                    self.error(text);
+                    // the line is borrowed from `lines`: copy it for the error text
+                    let line = line.to_vec();
+                    if self.bad(&line, &why) {
+                        self.lines = None;
+                        return false;
+                    }
                 }
             }
         }
@@ -938,6 +1037,429 @@ fn set_channel(frame: &mut CanFrame, chan: &str) {
     if frame.channel.as_deref() != Some(chan) {
         frame.channel = Some(chan.to_string());
     }
+}
+
+/// sniff.py `head`: the first HEAD_SIZE bytes (decompressed for a `.gz` name; what a damaged
+/// one gives before the damage); empty when the file cannot be read or is no regular file.
+pub fn first_bytes(path: &Path) -> Vec<u8> {
+    // a FIFO must not be read twice (nor a device): its name decides
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return Vec::new();
+    }
+    let Ok(file) = File::open(path) else {
+        return Vec::new();
+    };
+    let mut src = if is_gzip(path) {
+        Source::Gz(Box::new(GzReader::new(file)))
+    } else {
+        Source::Plain(Counted {
+            inner: Box::new(file),
+            count: 0,
+        })
+    };
+    let mut buf = Vec::new();
+    read_more(&mut src, &mut buf, HEAD_SIZE);
+    buf
+}
+
+/// Whether a stripped line parses as a candump frame (sniff.py `_frame_line`).
+pub fn parses_as_candump(text: &[u8]) -> bool {
+    let mut line = text.to_vec();
+    line.push(b'\n');
+    matches!(
+        parse_line(&line, &mut CanFrame::default(), &mut Clock::new(false)),
+        Ok(Some(_))
+    )
+}
+
+// -- time ---------------------------------------------------------------------------------------
+
+/// candump.py `RELATIVE_LIMIT`: a smaller stamp is relative (-tz, -td), not Unix time.
+pub const RELATIVE_LIMIT: f64 = 662688000.0;
+
+/// candump.py `Clock`: a line's stamp as `t`, summed when the log holds -td deltas.
+pub struct Clock {
+    deltas: bool,
+    total: f64,
+}
+
+impl Clock {
+    pub fn new(deltas: bool) -> Clock {
+        Clock { deltas, total: 0.0 }
+    }
+
+    /// A numeric stamp of a default-layout or ERROR line.
+    fn relative(&mut self, stamp: f64) -> f64 {
+        if !self.deltas || stamp >= RELATIVE_LIMIT {
+            return stamp;
+        }
+        self.total += stamp;
+        self.total
+    }
+}
+
+/// candump.py `holds_deltas`: whether the relative stamps of the head's default-layout lines
+/// go back (candump -td); and whether a line of it has a -tA date (for non-Unix builds).
+fn holds_deltas(head: &[u8], cr: bool) -> (bool, bool) {
+    let sep = if cr { b'\r' } else { b'\n' };
+    let mut lines: Vec<&[u8]> = head.split(|&b| b == sep).collect();
+    lines.pop(); // the last one may be cut
+    let mut clock = Clock::new(false);
+    let mut frame = CanFrame::default();
+    let mut line = Vec::new();
+    let mut last = -1.0;
+    let mut dated = false;
+    for text in lines {
+        line.clear();
+        line.extend_from_slice(text);
+        line.push(b'\n');
+        let Ok(Some((layout, is_dated))) = parse_line(&line, &mut frame, &mut clock) else {
+            continue;
+        };
+        dated |= is_dated;
+        let Some(t) = frame.t else { continue };
+        if layout != Layout::Columns || t >= RELATIVE_LIMIT || is_dated {
+            continue;
+        }
+        if t < last {
+            return (true, dated);
+        }
+        last = t;
+    }
+    (false, dated)
+}
+
+/// candump.py `local_time`: `2020-12-19` and `12:04:45.485261` (candump -tA) as Unix time in
+/// this machine's time zone, through the C library's `mktime` as Python's `time.mktime`.
+fn local_time(date: &[u8], clock: &[u8]) -> Result<f64, String> {
+    let bad = || "bad date and time".to_string();
+    let (hms, frac) = match clock.iter().position(|&c| c == b'.') {
+        Some(i) => (&clock[..i], &clock[i + 1..]),
+        None => (clock, &clock[clock.len()..]),
+    };
+    let fields: Vec<&[u8]> = date
+        .split(|&c| c == b'-')
+        .chain(hms.split(|&c| c == b':'))
+        .collect();
+    let widths = [(4, 4), (1, 2), (1, 2), (1, 2), (1, 2), (1, 2)];
+    let isdigit = |x: &[u8]| !x.is_empty() && x.iter().all(u8::is_ascii_digit);
+    if fields.len() != 6
+        || !fields
+            .iter()
+            .zip(widths)
+            .all(|(x, (lo, hi))| (lo..=hi).contains(&x.len()) && isdigit(x))
+    {
+        return Err(bad());
+    }
+    if !(frac.is_empty() || isdigit(frac) && frac.len() <= 9) {
+        return Err(bad());
+    }
+    let num = |x: &[u8]| x.iter().fold(0i64, |v, &c| v * 10 + (c - b'0') as i64);
+    let v: Vec<i64> = fields.iter().map(|x| num(x)).collect();
+    let (y, mo, d, h, mi, sec) = (v[0], v[1], v[2], v[3], v[4], v[5]);
+    if !((1..=12).contains(&mo) && (1..=31).contains(&d) && h <= 23 && mi <= 59 && sec <= 60) {
+        return Err(bad());
+    }
+    let seconds = mktime(y, mo, d, h, mi, sec).ok_or_else(bad)?;
+    Ok(if frac.is_empty() {
+        seconds
+    } else {
+        seconds + num(frac) as f64 / 10f64.powi(frac.len() as i32)
+    })
+}
+
+/// `time.mktime((y, mo, d, h, mi, s, 0, 0, -1))`: None where Python raises OverflowError.
+#[cfg(unix)]
+fn mktime(y: i64, mo: i64, d: i64, h: i64, mi: i64, s: i64) -> Option<f64> {
+    use std::ffi::{c_char, c_int, c_long};
+    #[repr(C)]
+    struct Tm {
+        tm_sec: c_int,
+        tm_min: c_int,
+        tm_hour: c_int,
+        tm_mday: c_int,
+        tm_mon: c_int,
+        tm_year: c_int,
+        tm_wday: c_int,
+        tm_yday: c_int,
+        tm_isdst: c_int,
+        tm_gmtoff: c_long,
+        tm_zone: *const c_char,
+    }
+    extern "C" {
+        fn mktime(tm: *mut Tm) -> i64;
+    }
+    let mut tm = Tm {
+        tm_sec: s as c_int,
+        tm_min: mi as c_int,
+        tm_hour: h as c_int,
+        tm_mday: d as c_int,
+        tm_mon: (mo - 1) as c_int,
+        tm_year: (y - 1900) as c_int,
+        tm_wday: -1, // Python's sentinel: still -1 after a failed call
+        tm_yday: -1,
+        tm_isdst: -1,
+        tm_gmtoff: 0,
+        tm_zone: std::ptr::null(),
+    };
+    // SAFETY: a valid struct tm for the duration of the call; mktime only reads and writes it
+    let tt = unsafe { mktime(&mut tm) };
+    if tt == -1 && tm.tm_wday == -1 {
+        return None;
+    }
+    Some(tt as f64)
+}
+
+/// Elsewhere the Python engine reads -tA stamps (`DecodeRun::open` says Unsupported).
+#[cfg(not(unix))]
+fn mktime(_y: i64, _mo: i64, _d: i64, _h: i64, _mi: i64, _s: i64) -> Option<f64> {
+    None
+}
+
+// -- one line ---------------------------------------------------------------------------------
+
+/// candump.py's layouts: an -l/-L line, or the default columns (and ERROR lines).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    Log,
+    Columns,
+}
+
+/// candump.py `is_complete`: whether a line that parsed, but has no line end, cannot be the
+/// start of a longer one.
+fn is_complete(line: &[u8], layout: Layout) -> bool {
+    let parts: Vec<&[u8]> = line
+        .split(|&b| is_space(b))
+        .filter(|p| !p.is_empty())
+        .collect();
+    let last = parts[parts.len() - 1];
+    if layout != Layout::Log || is_direction(last) {
+        return true;
+    }
+    let payload = match last.iter().position(|&c| c == b'#') {
+        Some(i) => &last[i + 1..],
+        None => &last[last.len()..],
+    };
+    match payload.first() {
+        Some(b'#') => payload.len() == 2 + 2 * CANFD_MAX_LEN,
+        Some(b'R') | Some(b'r') => payload.len() == 2,
+        _ => payload.contains(&b'_') || payload.len() == 16,
+    }
+}
+
+/// candump.py `CANFD_MAX_LEN`
+const CANFD_MAX_LEN: usize = 64;
+
+/// candump.py `_channel`
+fn channel_of(chan: &[u8]) -> Result<&str, String> {
+    decode_ascii(chan).map_err(|_| "the channel name is not ASCII".to_string())
+}
+
+/// candump.py `_identifier`: (identifier, extended, error frame) of 1-8 hex digits.
+fn identifier(ident: &[u8]) -> Result<(u64, bool, bool), String> {
+    if ident.is_empty() || !all_hex(ident) || ident.len() > 8 {
+        return Err(format!(
+            "bad identifier {}",
+            str_repr(&ascii_replace(ident))
+        ));
+    }
+    let mut aid = ident
+        .iter()
+        .fold(0u64, |v, &c| v << 4 | hex_val(c).unwrap_or(0) as u64);
+    let extended = ident.len() > 3;
+    let mut error = false;
+    if extended {
+        if aid & CAN_RTR_FLAG != 0 {
+            let text = std::str::from_utf8(ident).unwrap_or_default();
+            return Err(format!("identifier {text} does not fit in 29 bits"));
+        }
+        error = aid & CAN_ERR_FLAG != 0;
+        aid &= CAN_EFF_MASK;
+    } else if aid > 0x7FF {
+        return Err("standard identifier above 0x7FF".into());
+    }
+    Ok((aid, extended, error))
+}
+
+/// candump.py `parse_line`: any candump line into `frame`: Ok(Some((layout, dated))), Ok(None)
+/// for a blank or `#` comment line, else the ValueError text saying what is wrong.
+fn parse_line(
+    line: &[u8],
+    frame: &mut CanFrame,
+    clock: &mut Clock,
+) -> Result<Option<(Layout, bool)>, String> {
+    let parts: Vec<&[u8]> = line
+        .split(|&b| is_space(b))
+        .filter(|p| !p.is_empty())
+        .collect();
+    if parts.is_empty() || parts[0][0] == b'#' {
+        return Ok(None);
+    }
+    let mut t = None;
+    let mut dated = false;
+    let mut rest = &parts[..];
+    let first = parts[0];
+    if first[0] == b'(' {
+        if first.len() > 1 && first[first.len() - 1] == b')' {
+            t = Some(py_float(&first[1..first.len() - 1])?);
+            rest = &parts[1..];
+        } else if parts.len() > 1 && parts[1].last() == Some(&b')') {
+            let clock_part = parts[1];
+            t = Some(local_time(
+                &first[1..],
+                &clock_part[..clock_part.len() - 1],
+            )?);
+            dated = true;
+            rest = &parts[2..];
+        } else {
+            return Err("no (timestamp)".into());
+        }
+    }
+    if rest.len() < 2 {
+        return Err("expected a channel and a frame".into());
+    }
+    let (chan, body) = (rest[0], &rest[1..]);
+    let layout;
+    if body.len() == 1 && body[0] == b"ERROR" {
+        let chan = channel_of(chan)?;
+        frame.arbitration_id = 0;
+        frame.data.clear();
+        frame.is_extended = true;
+        frame.is_remote = false;
+        frame.is_error = true;
+        frame.is_fd = false;
+        frame.dlc = Some(0);
+        set_channel(frame, chan);
+        layout = Layout::Columns;
+    } else if body[0].contains(&b'#')
+        && (body.len() == 1 || (body.len() == 2 && is_direction(body[1])))
+    {
+        let chan = channel_of(chan)?;
+        log_frame(body[0], frame)?;
+        set_channel(frame, chan);
+        layout = Layout::Log;
+    } else if body.len() >= 2 && body[1].first() == Some(&b'[') {
+        let chan = channel_of(chan)?;
+        columns_frame(body, frame)?;
+        set_channel(frame, chan);
+        layout = Layout::Columns;
+    } else {
+        return Err("not a candump frame".into());
+    }
+    if let Some(stamp) = t {
+        if layout == Layout::Columns && !dated {
+            t = Some(clock.relative(stamp));
+        }
+    }
+    frame.t = t;
+    Ok(Some((layout, dated)))
+}
+
+/// candump.py `_log_frame`: `ID#DATA` and its variants (-l/-L).
+fn log_frame(body: &[u8], frame: &mut CanFrame) -> Result<(), String> {
+    let hash = body.iter().position(|&c| c == b'#').unwrap_or(body.len());
+    let (ident, payload) = (&body[..hash], &body[(hash + 1).min(body.len())..]);
+    let (aid, extended, error) = identifier(ident)?;
+    let (mut remote, mut fd) = (false, false);
+    let data = &mut frame.data;
+    let dlc;
+    if payload.first() == Some(&b'#') {
+        // CAN FD: "##", one flags digit (BRS, ESI: not kept), the data
+        if payload.len() < 2 || !payload[1].is_ascii_hexdigit() {
+            return Err("CAN FD frame without its flags digit".into());
+        }
+        fd = true;
+        unhexlify(&payload[2..], data)?;
+        dlc = data.len();
+    } else if matches!(payload.first(), Some(b'R') | Some(b'r')) {
+        // remote frame, optional DLC digit
+        data.clear();
+        let d = if payload.len() > 1 {
+            py_int16(&payload[1..])?
+        } else {
+            Some(0)
+        };
+        match d {
+            Some(d) if (0..=15).contains(&d) => dlc = d as usize,
+            _ => return Err("bad remote DLC".into()),
+        }
+        remote = true;
+    } else if let Some(us) = payload.iter().position(|&c| c == b'_') {
+        // classic frame with a DLC of 9-15: 8 data bytes and "_<dlc>"
+        unhexlify(&payload[..us], data)?;
+        match py_int16(&payload[us + 1..])? {
+            Some(d) if data.len() == 8 && (9..=15).contains(&d) => dlc = d as usize,
+            _ => return Err("bad DLC suffix".into()),
+        }
+    } else {
+        unhexlify(payload, data).map_err(|e| format!("bad data: {e}"))?;
+        dlc = data.len();
+        fd = dlc > 8; // more than a classic frame holds: CAN FD written without its "##"
+    }
+    if data.len() > CANFD_MAX_LEN {
+        return Err(format!(
+            "{} data bytes: more than a CAN FD frame holds",
+            data.len()
+        ));
+    }
+    frame.arbitration_id = aid as u32;
+    frame.is_extended = extended;
+    frame.is_remote = remote;
+    frame.is_error = error;
+    frame.is_fd = fd;
+    frame.dlc = Some(dlc);
+    Ok(())
+}
+
+/// candump.py `_columns_frame`: `ID  [n]  AA BB ...` (the default layout).
+fn columns_frame(body: &[&[u8]], frame: &mut CanFrame) -> Result<(), String> {
+    let (aid, extended, error) = identifier(body[0])?;
+    let length = body[1];
+    let digits: &[u8] = if length.len() >= 2 {
+        &length[1..length.len() - 1]
+    } else {
+        &[]
+    };
+    let isdigit = !digits.is_empty() && digits.iter().all(u8::is_ascii_digit);
+    if length.last() != Some(&b']') || !isdigit || digits.len() > 2 {
+        return Err(format!("bad length {}", str_repr(&ascii_replace(length))));
+    }
+    let n = digits
+        .iter()
+        .fold(0usize, |v, &c| v * 10 + (c - b'0') as usize);
+    let fd = digits.len() == 2; // candump prints a CAN FD length with two digits: [08], [12]
+    if n > CANFD_MAX_LEN {
+        return Err(format!("length {n}: more than a CAN FD frame holds"));
+    }
+    let values = &body[2..];
+    frame.arbitration_id = aid as u32;
+    frame.is_extended = extended;
+    frame.is_error = error;
+    frame.dlc = Some(n);
+    frame.data.clear();
+    if values.len() == 2 && values[0] == b"remote" && values[1] == b"request" && !fd {
+        frame.is_remote = true;
+        frame.is_fd = false;
+        return Ok(());
+    }
+    let tokens = &values[..n.min(values.len())];
+    let tail = &values[tokens.len()..];
+    if tokens.len() < n || !tokens.iter().all(|x| x.len() == 2 && all_hex(x)) {
+        return Err(format!("expected {n} data bytes"));
+    }
+    let tail_ok =
+        tail.is_empty() || (tail.len() == 1 && tail[0] == b"ERRORFRAME") || tail[0][0] == b'\'';
+    if !tail_ok {
+        return Err(format!("more than {n} data bytes"));
+    }
+    for x in tokens {
+        frame
+            .data
+            .push(hex_val(x[0]).unwrap_or(0) << 4 | hex_val(x[1]).unwrap_or(0));
+    }
+    frame.is_remote = false;
+    frame.is_fd = fd || n > 8;
+    Ok(())
 }
 
 /// `float()` of a time stamp. The usual `seconds.micros` with at most 2^53 as its digits
@@ -1032,105 +1554,6 @@ fn fast_parse(line: &[u8], frame: &mut CanFrame) -> bool {
     true
 }
 
-/// `_parse_candump`: any candump -L line; Ok(false) for a blank or comment line, else the
-/// ValueError text saying what is wrong.
-fn parse_candump(line: &[u8], frame: &mut CanFrame) -> Result<bool, String> {
-    let mut parts: Vec<&[u8]> = line
-        .split(|&b| is_space(b))
-        .filter(|p| !p.is_empty())
-        .collect();
-    if parts.is_empty() || parts[0][0] == b'#' {
-        return Ok(false);
-    }
-    if line.last() != Some(&b'\n') {
-        return Err("truncated: the file ends in the middle of this line".into());
-    }
-    if parts.len() == 4 && is_direction(parts[3]) {
-        parts.truncate(3);
-    }
-    if parts.len() != 3 {
-        return Err(format!("expected 3 fields, found {}", parts.len()));
-    }
-    let (stamp, chan, body) = (parts[0], parts[1], parts[2]);
-    if stamp[0] != b'(' || stamp[stamp.len() - 1] != b')' {
-        return Err("no (timestamp)".into());
-    }
-    let t = py_float(&stamp[1..stamp.len() - 1])?;
-    let Some(hash) = body.iter().position(|&c| c == b'#') else {
-        return Err("no '#' between identifier and data".into());
-    };
-    let (ident, payload) = (&body[..hash], &body[hash + 1..]);
-    if ident.is_empty() || !all_hex(ident) || ident.len() > 8 {
-        return Err(format!(
-            "bad identifier {}",
-            str_repr(&ascii_replace(ident))
-        ));
-    }
-    let mut aid = ident
-        .iter()
-        .fold(0u64, |v, &c| v << 4 | hex_val(c).unwrap_or(0) as u64);
-    let extended = ident.len() > 3;
-    let mut error = false;
-    if extended {
-        if aid & CAN_RTR_FLAG != 0 {
-            let text = std::str::from_utf8(ident).unwrap_or_default();
-            return Err(format!("identifier {text} does not fit in 29 bits"));
-        }
-        error = aid & CAN_ERR_FLAG != 0;
-        aid &= CAN_EFF_MASK;
-    } else if aid > 0x7FF {
-        return Err("standard identifier above 0x7FF".into());
-    }
-    let (mut remote, mut fd) = (false, false);
-    let data = &mut frame.data;
-    let dlc;
-    if payload.first() == Some(&b'#') {
-        // CAN FD: "##", one flags digit (BRS, ESI: not kept), the data
-        if payload.len() < 2 || !payload[1].is_ascii_hexdigit() {
-            return Err("CAN FD frame without its flags digit".into());
-        }
-        fd = true;
-        unhexlify(&payload[2..], data)?;
-        dlc = data.len();
-    } else if matches!(payload.first(), Some(b'R') | Some(b'r')) {
-        // remote frame, optional DLC digit
-        data.clear();
-        let d = if payload.len() > 1 {
-            py_int16(&payload[1..])?
-        } else {
-            Some(0)
-        };
-        match d {
-            Some(d) if (0..=15).contains(&d) => dlc = d as usize,
-            _ => return Err("bad remote DLC".into()),
-        }
-        remote = true;
-    } else if let Some(us) = payload.iter().position(|&c| c == b'_') {
-        // classic frame with a DLC of 9-15: 8 data bytes and "_<dlc>"
-        unhexlify(&payload[..us], data)?;
-        match py_int16(&payload[us + 1..])? {
-            Some(d) if data.len() == 8 && (9..=15).contains(&d) => dlc = d as usize,
-            _ => return Err("bad DLC suffix".into()),
-        }
-    } else {
-        unhexlify(payload, data).map_err(|e| format!("bad data: {e}"))?;
-        dlc = data.len();
-    }
-    if !fd && data.len() > 8 {
-        return Err(format!("{} data bytes in a classic CAN frame", data.len()));
-    }
-    let chan = decode_ascii(chan)?;
-    frame.t = Some(t);
-    frame.arbitration_id = aid as u32;
-    frame.is_extended = extended;
-    frame.is_remote = remote;
-    frame.is_error = error;
-    frame.is_fd = fd;
-    frame.dlc = Some(dlc);
-    set_channel(frame, chan);
-    Ok(true)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1151,7 +1574,8 @@ mod tests {
         assert!(py_int16(b"0_x1").is_err());
         assert_eq!(py_int16(b"-0").unwrap(), Some(0));
         assert_eq!(bytes_repr(b"\xff\x00\\"), "b'\\xff\\x00\\\\'");
-        assert_eq!(quote(b"  ab\x1c\n"), "'ab'");
+        assert_eq!(quote(b"  ab\x1c\n", MAX_QUOTED), "'ab'");
+        assert_eq!(quote(b"abcdef", 5), "'ab...'");
         assert_eq!(can_bus_name(Some("1")), "can1");
         assert_eq!(can_bus_name(Some("")), "can0");
     }
@@ -1186,9 +1610,59 @@ mod tests {
         assert_eq!((f.arbitration_id, f.is_extended), (0x123456, true));
         assert!(!fast_parse(b"(1.5) can0 0x12#00\n", &mut f));
         assert_eq!(
-            parse_candump(b"(1.5) can0 0x12#00\n", &mut f).unwrap_err(),
+            parse_line(b"(1.5) can0 0x12#00\n", &mut f, &mut Clock::new(false)).unwrap_err(),
             "bad identifier '0x12'"
         );
+    }
+
+    #[test]
+    fn every_layout() {
+        let mut f = CanFrame::default();
+        let mut clock = Clock::new(false);
+        let mut parse = |line: &[u8]| parse_line(line, &mut f, &mut clock).map(|p| p.map(|x| x.0));
+        assert_eq!(
+            parse(b"  can0  0C8   [8]  F0 00 00 00 00 00 00 00\n"),
+            Ok(Some(Layout::Columns))
+        );
+        assert_eq!(
+            parse(b"(1.5) vcan0 123   [12]  00 01 02 03 04 05 06 07 08 09 0A 0B\n"),
+            Ok(Some(Layout::Columns))
+        );
+        assert_eq!(
+            parse(b"can0  123   [3]  00 01\n"),
+            Err("expected 3 data bytes".into())
+        );
+        assert_eq!(
+            parse(b"can0  123   [1]  00 01\n"),
+            Err("more than 1 data bytes".into())
+        );
+        assert_eq!(
+            parse(b"can0  20000004   [8]  00 00 00 00 00 00 00 00   ERRORFRAME\n"),
+            Ok(Some(Layout::Columns))
+        );
+        assert_eq!(parse(b"can0 ERROR\n"), Ok(Some(Layout::Columns)));
+        assert_eq!(
+            parse(b"(1.0) can0 064#F001FFFFFFFFFFFFFFFF\n"),
+            Ok(Some(Layout::Log))
+        );
+        assert_eq!(parse(b"# comment\n"), Ok(None));
+        assert_eq!(
+            parse(b"(2020-13-19 12:04:45.485261) can0 ERROR\n"),
+            Err("bad date and time".into())
+        );
+    }
+
+    #[test]
+    fn deltas_and_complete_lines() {
+        let td = b"(000.000000) can0 123 [1] 11\n(000.500000) can0 123 [1] 11\n(000.100000) can0 123 [1] 11\n";
+        assert_eq!(holds_deltas(td, false), (true, false));
+        let tz = b"(000.000000) can0 123 [1] 11\n(000.500000) can0 123 [1] 11\n(000.600000) can0 123 [1] 11\n";
+        assert_eq!(holds_deltas(tz, false), (false, false));
+        assert!(!is_complete(b"(1.0) can0 123#1122", Layout::Log));
+        assert!(is_complete(b"(1.0) can0 123#1122 R", Layout::Log));
+        assert!(is_complete(b"(1.0) can0 123#1122334455667788", Layout::Log));
+        assert!(is_complete(b"(1.0) can0 123#R5", Layout::Log));
+        assert!(!is_complete(b"(1.0) can0 123#R", Layout::Log));
     }
 
     fn read_all(name: &str, bytes: &[u8]) -> (usize, Vec<String>) {

@@ -23,6 +23,7 @@ pub mod pyfloat;
 pub mod rawfile;
 pub mod registers;
 pub mod serial;
+pub mod sniff;
 pub mod tracker;
 pub mod writers;
 

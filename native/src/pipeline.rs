@@ -76,10 +76,29 @@ fn suffixes(path: &Path) -> Vec<String> {
         .collect()
 }
 
-/// What analyzer/sources/capture.py `reader_for` picks for `path` (longest registered suffix
-/// first, `.log.gz` before `.gz`); an `Unsupported` error for what only Python reads
-/// (python-can's formats, `.mcap`) or refuses (`.mcap.gz`, `.mf4.gz`: a usage error there).
+/// What analyzer/sources/capture.py `reader_for` picks for `path`: by what it holds
+/// (sniff.rs), else by its longest registered suffix (`.log.gz` before `.gz`); an
+/// `Unsupported` error for what only Python reads (PCAN traces, python-can's formats, MCAP)
+/// or refuses (`.mcap.gz`, `.mf4.gz`: a usage error there).
 pub fn reader_for(path: &Path) -> io::Result<ReaderKind> {
+    match crate::sniff::sniff(path) {
+        Some("candump") => return Ok(ReaderKind::Candump),
+        Some(other) => {
+            return Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                format!(
+                    "{}: a {other} capture is read by the Python engine only",
+                    path.display()
+                ),
+            ))
+        }
+        None => {}
+    }
+    reader_by_suffix(path)
+}
+
+/// `reader_for` by the suffix alone (a file whose content tells nothing).
+fn reader_by_suffix(path: &Path) -> io::Result<ReaderKind> {
     const CAN_FORMATS: [&str; 6] = [".log", ".asc", ".blf", ".trc", ".csv", ".mf4"];
     const GZIP_READABLE: [&str; 5] = [".log", ".asc", ".blf", ".trc", ".csv"];
     let registered = |tail: &str| -> Option<&'static str> {
@@ -276,7 +295,7 @@ impl CanBuses {
 /// Where the input comes from.
 enum Input {
     Bytes(BytesReader),
-    Can(CandumpReader),
+    Can(Box<CandumpReader>),
 }
 
 /// What happens to decoded records: lint, pairing, the filter, the writer (`Decoding._post`
@@ -391,8 +410,14 @@ impl DecodeRun {
         let (input, decoders) = match kind {
             ReaderKind::Candump => {
                 let reader = CandumpReader::open(path)?;
+                if reader.dated && cfg!(not(unix)) {
+                    return Err(io::Error::new(
+                        io::ErrorKind::Unsupported,
+                        "candump -tA dates are read by the Python engine on this system",
+                    ));
+                }
                 (
-                    Input::Can(reader),
+                    Input::Can(Box::new(reader)),
                     Decoders::Can(Box::new(CanBuses::new(opts.bus.as_deref()))),
                 )
             }
@@ -484,7 +509,7 @@ impl DecodeRun {
         }
         match &self.input {
             Input::Bytes(r) => r.position(),
-            Input::Can(r) => r.position().min(self.size),
+            Input::Can(r) => CandumpReader::position(r).min(self.size),
         }
     }
 

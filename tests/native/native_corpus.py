@@ -31,6 +31,7 @@ MINED = [
     "analyzer/test_can_files.py",
     "analyzer/test_cli_decode.py",
     "sources/test_capture_readers.py",
+    "sources/test_candump_layouts.py",
 ]
 
 CANDUMP_LINE = re.compile(r"^\s*\(")
