@@ -23,7 +23,6 @@ from textual import events, on, work
 from textual.app import App, ComposeResult, SystemCommand
 from textual.binding import BindingType
 from textual.containers import Horizontal, Vertical
-from textual.markup import escape
 from textual.screen import Screen
 from textual.timer import Timer
 from textual.widgets import Footer, Input, RichLog, Static, TabbedContent, TabPane
@@ -645,10 +644,9 @@ class Eg2ScopeApp(App[int]):
             if key.action in ("command_palette", "help"):
                 continue
             title = key.description.split(":")[0].split(" (")[0]
-            # the palette reads help as markup: "[/ f]" would be a closing tag
             yield SystemCommand(
-                escape(title.capitalize()),
-                escape(f"{key.description} [{keys.shown_keys(key)}]"),
+                keys.literal(title.capitalize()),
+                keys.literal(f"{key.description} [{keys.shown_keys(key)}]"),
                 lambda action=key.action: self.run_action(action),
             )
 

@@ -54,6 +54,7 @@ class TuiFeed(Listener):
     tracker's states, read on the session's thread only."""
 
     wants_states = False
+    wants_raw = True  # the input tells the time order which buses are still to be heard from
 
     def __init__(self, store: RecordStore | None = None, live: bool = False) -> None:
         self.store = store if store is not None else RecordStore()
@@ -113,6 +114,9 @@ class TuiFeed(Listener):
                     with self._lock:
                         self.trigger = None  # one shot: the user re-arms
                     break
+
+    def on_raw(self, items: list[Any]) -> None:
+        self.merge.hear(items)
 
     def on_states(self, samples: Sequence[StateSample]) -> None:
         changed = self._changed

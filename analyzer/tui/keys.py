@@ -77,6 +77,13 @@ def bindings() -> list[BindingType]:
     ]
 
 
+def literal(text: str) -> str:
+    """``text`` as Textual markup that shows it as it is: the command palette reads its help as
+    markup, where "[/ f]" is a closing tag and "[End G]" a style (textual.markup.escape
+    passes both)."""
+    return text.replace("[", "\\[")
+
+
 def shown_keys(k: Key) -> str:
     return k.shown or k.keys.replace(",", " ")
 

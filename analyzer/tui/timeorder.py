@@ -2,16 +2,20 @@
 
 A session hands records over in stream order: the order its decoding finished them. Across
 buses that is not time order: a serial frame is finished when its last byte (or the idle gap
-after it) has come, so CAN frames captured meanwhile are handed over first, and a time column
-would run backwards. ``TimeMerge`` merges the buses' streams by time before the store takes
-them (a k-way merge: a record is let through once every bus still talking has reached its
-time), so the store, and the frame list, hold records in capture-time order.
+after it) has come, and a byte stream's first frames wait until its protocol is detected, so
+CAN frames captured meanwhile are handed over first, and a time column would run backwards.
+``TimeMerge`` merges the buses' streams by time before the store takes them, so the store,
+and the frame list, hold records in capture-time order:
 
+- It hears the raw input (``hear``) as well as the records (``push``): a bus whose bytes came
+  in but whose records are not out yet holds the others back from the time of those bytes.
+  A record is let through once every bus still talking has reached its time (a k-way merge).
 - Within a bus, stream order is kept: a bus whose own clock steps back is not reordered (its
   records sort at the latest time the bus had reached).
-- A bus silent for ``hold_s`` (of the capture's clock, or the wall clock live) holds nobody
-  back: the view never waits on a quiet line. Captures hold ``CAPTURE_HOLD_S`` (longer than a
-  frame is ever held), so their order is strict; live sessions hold a batching window.
+- A bus quiet for ``hold_s`` (no input: of the capture's clock, or the wall clock live) holds
+  nobody back, so the view never waits on a silent line. Captures hold ``CAPTURE_HOLD_S``,
+  live sessions about a batching window (``LIVE_HOLD_S``); at most ``MAX_HELD`` records wait
+  (a slow line still detecting its protocol cannot hold a fast bus's records without end).
 - One bus (a raw dump, a candump log of one channel) is handed through as it comes: its stream
   order is its time order, and a native batch stays a batch.
 - ``flush()`` at the end lets everything through.
@@ -27,7 +31,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from itertools import count
-from typing import Final
+from typing import Any, Final
 
 from decoders.model import Record
 
@@ -35,15 +39,19 @@ from ..batches import column
 
 CAPTURE_HOLD_S: Final = 2.0  # capture seconds a quiet bus may hold the others back
 LIVE_HOLD_S: Final = 0.3  # live: about a batching window and a serial line's idle gap
+MAX_HELD: Final = 100_000
 
 
 class TimeMerge:
     """See the module doc. ``push(records)`` and ``advance(now)`` return the records that are
     ready, in order; ``flush()`` all that are left."""
 
-    def __init__(self, hold_s: float = CAPTURE_HOLD_S) -> None:
+    def __init__(self, hold_s: float = CAPTURE_HOLD_S, max_held: int = MAX_HELD) -> None:
         self.hold_s = hold_s
-        self.latest: dict[str, float] = {}  # per bus: the time it has reached (its sort key)
+        self.max_held = max_held
+        self.reached: dict[str, float] = {}  # per bus: the time its records have reached
+        self.heard: dict[str, float] = {}  # per bus: the latest time of its input
+        self.first_heard: dict[str, float] = {}  # per bus: the time of its first input
         self._held: dict[str, deque[tuple[float, int, Record]]] = {}
         self._held_count = 0
         self._arrival = count()
@@ -52,20 +60,43 @@ class TimeMerge:
     def held(self) -> int:
         return self._held_count
 
+    def hear(self, items: Sequence[Any]) -> None:
+        """The raw input (``Item``s) of the records that will follow."""
+        heard, first = self.heard, self.first_heard
+        if len(heard) == 1 and items:
+            (only,) = heard
+            last = items[-1].payload.t
+            if last is not None and all(item.bus == only for item in items):
+                heard[only] = max(heard[only], last)  # one bus: its input comes in time order
+                return
+        for item in items:
+            t = item.payload.t
+            if t is None:
+                continue
+            bus = item.bus
+            if bus not in heard:
+                heard[bus] = first[bus] = t
+            elif t > heard[bus]:
+                heard[bus] = t
+
     def push(self, records: Sequence[Record], now: float | None = None) -> Sequence[Record]:
         """Take a batch (in stream order); ``now``: the wall clock of a live session."""
         if not records:
             return self.advance(now)
         buses = column(records, "bus")
-        first = buses[0]
-        if self._held_count == 0 and all(b == first for b in buses) and set(self.latest) <= {first}:
-            self._reach(first, column(records, "t"))
+        only = buses[0]
+        if (
+            not self._held_count
+            and set(self.heard) | set(self.reached) <= {only}
+            and all(b == only for b in buses)
+        ):
+            self._reach(only, column(records, "t"))
             return records  # one bus so far: its stream order is the order
-        latest, held, arrival = self.latest, self._held, self._arrival
+        reached, held, arrival = self.reached, self._held, self._arrival
         for rec, bus, t in zip(records, buses, column(records, "t"), strict=True):
-            reached = latest.get(bus, -math.inf)
-            key = reached if t is None or t < reached else t
-            latest[bus] = key
+            last = reached.get(bus, -math.inf)
+            key = last if t is None or t < last else t
+            reached[bus] = key
             queue = held.get(bus)
             if queue is None:
                 queue = held[bus] = deque()
@@ -78,29 +109,39 @@ class TimeMerge:
         live, so quiet buses stop holding the others back while nothing arrives)."""
         if not self._held_count:
             return []
-        newest = max(self.latest.values())
-        clock = newest if now is None else max(newest, now)
-        talking = [t for t in self.latest.values() if t >= clock - self.hold_s]
-        return self._release(min(talking) if talking else math.inf)
+        buses = set(self.reached) | set(self.heard)
+        heard = {b: self.heard.get(b, self.reached.get(b, -math.inf)) for b in buses}
+        clock = max(heard.values())
+        if now is not None:
+            clock = max(clock, now)
+        # a bus with input but no records yet holds the others from its first input on
+        bounds = [
+            self.reached.get(b, self.first_heard.get(b, -math.inf))
+            for b in buses
+            if heard[b] >= clock - self.hold_s
+        ]
+        out = self._release(min(bounds) if bounds else math.inf)
+        if self._held_count > self.max_held:
+            out += self._release(math.inf, self._held_count - self.max_held)
+        return out
 
     def flush(self) -> list[Record]:
         return self._release(math.inf)
 
     def _reach(self, bus: str, times: Sequence[float | None]) -> None:
-        reached = self.latest.get(bus, -math.inf)
+        reached = self.reached.get(bus, -math.inf)
         for t in times:
             if t is not None and t > reached:
                 reached = t
-        self.latest[bus] = reached
+        self.reached[bus] = reached
 
-    def _release(self, until: float) -> list[Record]:
+    def _release(self, until: float, most: int | None = None) -> list[Record]:
+        """Held records up to ``until``, in order (``most``: no more than that many)."""
         heads = [(q[0], bus) for bus, q in self._held.items() if q and q[0][0] <= until]
-        if not heads:
-            return []
         heapq.heapify(heads)
         out: list[Record] = []
         held = self._held
-        while heads:
+        while heads and (most is None or len(out) < most):
             (_, _, rec), bus = heads[0]
             queue = held[bus]
             queue.popleft()
