@@ -205,7 +205,18 @@ class Eg2ScopeApp(App[int]):
         """Ages are measured on the wall clock live, on the capture's own clock otherwise."""
         return time.time() if self.plan.live else self.store.t_last
 
+    @property
+    def closing(self) -> bool:
+        """The app is being taken down: its widgets may be gone already (timers and the
+        feed's last updates must not look for them)."""
+        if self._exit or not self.screen_stack:
+            return True
+        screen = self.main_screen
+        return not screen.is_attached or not screen.children
+
     def on_feed_update(self, update: FeedUpdate) -> None:
+        if self.closing:
+            return
         self.captured, self.dropped = update.captured, update.dropped
         self.frames.take_new(update.count)
         self.main_screen.query_one(DevicePanel).take(update.devices, update.changed)
@@ -223,6 +234,8 @@ class Eg2ScopeApp(App[int]):
 
     def show_panels(self) -> None:
         """Redraw the visible panel (``PANELS_S``; hidden ones are drawn when shown)."""
+        if self.closing:
+            return
         active = self.main_screen.query_one(TabbedContent).active
         snap = self.snapshot
         if active == "devices":
@@ -305,6 +318,8 @@ class Eg2ScopeApp(App[int]):
         return " | ".join(parts)
 
     def show_status(self) -> None:
+        if self.closing:
+            return
         text = self.status_text()
         if text != self._status:  # one line of fixed height: no layout needed
             self._status = text
@@ -323,7 +338,7 @@ class Eg2ScopeApp(App[int]):
 
     def _apply_detail(self) -> None:
         self._detail_timer = None
-        if self.screen_stack:  # the timer can outlive the screens when the app quits
+        if not self.closing:  # the timer can outlive the screens when the app quits
             self._show_detail(self._detail_due)
 
     def _show_detail(self, index: int | None) -> None:
