@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 from conftest import CAPTURES, SIZE, SIZES, capture_app, until
 from textual.command import CommandPalette
+from textual.widgets import Input
 
 from analyzer.tui.widgets.detail import DetailTree
 from analyzer.tui.widgets.devices import DevicePanel
@@ -20,6 +21,9 @@ async def replayed(pilot) -> None:
     await until(pilot, lambda: app.done)
     # the detail pane follows the newest record a moment later (DETAIL_FOLLOW_S)
     await until(pilot, lambda: app.query_one(DetailTree).record is not None)
+    await until(pilot, lambda: app.frames.known == app.store.count)
+    app.frames.action_follow()  # the newest row in view, whenever the layout came
+    await pilot.pause()
     app.query_one(DevicePanel).changed_at.clear()  # highlights fade with wall time
     app.show_panels()
     await pilot.pause()
@@ -74,6 +78,7 @@ def test_command_palette(snap_compare) -> None:
         await replayed(pilot)
         await pilot.press("ctrl+p")
         await until(pilot, lambda: isinstance(pilot.app.screen, CommandPalette))
+        pilot.app.screen.query_one(Input).cursor_blink = False  # a steady picture
         await pilot.press(*"filter")
         await pilot.pause(0.5)
 
