@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
+import sys
 from collections.abc import AsyncIterator, Callable
 from contextlib import ExitStack, asynccontextmanager
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
@@ -19,7 +22,8 @@ from analyzer.commands.tui import capture_plan, extra_listeners, live_plan
 from analyzer.tui.app import Eg2ScopeApp
 from analyzer.tui.notes import Notes
 
-CAPTURES = Path(__file__).resolve().parents[2] / "captures"
+ROOT = Path(__file__).resolve().parents[2]
+CAPTURES = ROOT / "captures"
 SIZE = (200, 50)
 SIZES = {"80x24": (80, 24), "120x35": (120, 35), "200x50": (200, 50)}
 _readers = ExitStack()  # the captures' readers, closed when the tests end
@@ -90,3 +94,37 @@ async def until(pilot, condition: Callable[[], bool], timeout: float = 15.0) -> 
             pytest.fail(f"timed out after {timeout} s waiting for {condition}")
         await pilot.pause(0.1)
         waited += 0.1
+
+
+def eg2scope(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "analyzer", *argv],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+@pytest.fixture(scope="session")
+def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Every kind of input, made the way a user makes it."""
+    folder = tmp_path_factory.mktemp("inputs")
+    found = {
+        "serial dump": CAPTURES / "serial_session.bin",
+        "modbus dump": CAPTURES / "modbus_session.bin",
+        "candump log": CAPTURES / "can_pick_place.log",
+    }
+    for suffix in (".asc", ".blf"):
+        out = folder / f"pick_place{suffix}"
+        with can.LogReader(found["candump log"]) as reader, can.Logger(out) as writer:
+            for msg in reader:
+                writer.on_message_received(msg)
+        found[suffix] = out
+    for name, buses in (("demo recording", "serial,modbus,can"), ("can recording", "can")):
+        out = folder / f"{name.split()[0]}.mcap"
+        done = eg2scope("record", "--demo", "--buses", buses, "-o", str(out), "--duration", "3")
+        assert done.returncode == 0, done.stderr
+        found[name] = out
+    return found

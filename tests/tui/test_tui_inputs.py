@@ -11,55 +11,17 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
-import can
 import pytest
-from conftest import CAPTURES, SIZES, capture_app, driving, until
+from conftest import SIZES, capture_app, driving, eg2scope, until
 
 from analyzer import native
 from analyzer.batches import native_session_available
 from analyzer.tui.layout import row_layout
 from analyzer.tui.rows import ELLIPSIS, plain_row
 
-ROOT = Path(__file__).resolve().parents[2]
 CAN_NATIVE = native.available() and native_session_available()
-
-
-def eg2scope(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "analyzer", *argv],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        check=False,
-    )
-
-
-@pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Every kind of input, made the way a user makes it."""
-    folder = tmp_path_factory.mktemp("inputs")
-    found = {
-        "serial dump": CAPTURES / "serial_session.bin",
-        "modbus dump": CAPTURES / "modbus_session.bin",
-        "candump log": CAPTURES / "can_pick_place.log",
-    }
-    for suffix in (".asc", ".blf"):
-        out = folder / f"pick_place{suffix}"
-        with can.LogReader(found["candump log"]) as reader, can.Logger(out) as writer:
-            for msg in reader:
-                writer.on_message_received(msg)
-        found[suffix] = out
-    for name, buses in (("demo recording", "serial,modbus,can"), ("can recording", "can")):
-        out = folder / f"{name.split()[0]}.mcap"
-        done = eg2scope("record", "--demo", "--buses", buses, "-o", str(out), "--duration", "3")
-        assert done.returncode == 0, done.stderr
-        found[name] = out
-    return found
 
 
 def decoded(path: Path, *argv: str) -> list[dict]:
