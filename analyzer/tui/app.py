@@ -78,8 +78,8 @@ class Eg2ScopeApp(App[int]):
     CSS_PATH = "eg2scope.tcss"
     TITLE = "eg2scope"
     BINDINGS: ClassVar[list[BindingType]] = list(keys.bindings())
-    HORIZONTAL_BREAKPOINTS: ClassVar[list[tuple[int, str]]] = list(WIDTH_BREAKPOINTS)
-    VERTICAL_BREAKPOINTS: ClassVar[list[tuple[int, str]]] = list(HEIGHT_BREAKPOINTS)
+    HORIZONTAL_BREAKPOINTS = list(WIDTH_BREAKPOINTS)
+    VERTICAL_BREAKPOINTS = list(HEIGHT_BREAKPOINTS)
 
     def __init__(self, plan: SessionPlan, store: RecordStore | None = None) -> None:
         """Makes the session (ValueError: it cannot be made, e.g. an engine that does not
