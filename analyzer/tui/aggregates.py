@@ -113,6 +113,7 @@ class Aggregates:
         names = ("flags", "kind", "device", "errors", "bus", "latency_ms", "direction", "name")
         rows = zip(*(column(records, n) for n in names), strict=True)
         frames = []  # (index in the batch, bus, device) of the valid frames of a gripper
+        protocols: list[str] | None = None
         for k, (flags, kind, device, errors, bus, latency, direction, name) in enumerate(rows):
             if flags:
                 self._problems(flags, bool(errors), bus, device, first_index + k)
@@ -121,7 +122,9 @@ class Aggregates:
             key = (bus, device)
             frames.append((k, key))
             if latency is not None and direction == RESPONSE:
-                name = name or f"{kind} of ID {device}"  # (frames of a gripper have names)
+                if not name:  # as the frame list names it: by its protocol
+                    protocols = protocols or column(records, "protocol")
+                    name = protocols[k]
                 self._latency(self.latency_command, name, latency)
                 self._latency(self.latency_device, key, latency)
                 self._dirty_command.add(name)

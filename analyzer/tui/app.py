@@ -15,7 +15,7 @@ import re
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -69,7 +69,6 @@ class SessionPlan:
     freeze_on: str | None = None
     title: str = "eg2scope"
     notes: Notes | None = None
-    on_done: list[Callable[[Session], None]] = field(default_factory=list)
 
 
 class Eg2ScopeApp(App[int]):
@@ -78,8 +77,9 @@ class Eg2ScopeApp(App[int]):
     CSS_PATH = "eg2scope.tcss"
     TITLE = "eg2scope"
     BINDINGS: ClassVar[list[BindingType]] = list(keys.bindings())
-    HORIZONTAL_BREAKPOINTS = list(WIDTH_BREAKPOINTS)
-    VERTICAL_BREAKPOINTS = list(HEIGHT_BREAKPOINTS)
+    # Textual declares these without ClassVar (mypy would refuse one)
+    HORIZONTAL_BREAKPOINTS = list(WIDTH_BREAKPOINTS)  # noqa: RUF012
+    VERTICAL_BREAKPOINTS = list(HEIGHT_BREAKPOINTS)  # noqa: RUF012
 
     def __init__(self, plan: SessionPlan, store: RecordStore | None = None) -> None:
         """Makes the session (ValueError: it cannot be made, e.g. an engine that does not
@@ -164,10 +164,7 @@ class Eg2ScopeApp(App[int]):
 
     @work(thread=True, exclusive=True, name="session", exit_on_error=False)
     def run_session(self) -> None:
-        session = self.session
-        session.run()
-        for done in self.plan.on_done:
-            done(session)
+        self.session.run()
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker.name != "session" or event.state != WorkerState.ERROR:

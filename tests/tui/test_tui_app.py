@@ -224,6 +224,11 @@ def test_latency_figures_say_how_many_answers_they_are_of() -> None:
     assert stats.count == LATENCY_KEEP and stats.total == n
     assert stats.samples_text() == f"last {LATENCY_KEEP:,} of {n:,}"
     assert agg.snapshot().latency_by_device[("can0", 1)].samples_text().startswith("last ")
+    # a response without a manual name is listed under its protocol, as the frame list does
+    unnamed = Record(0.0, "can0", "eg2-can", "frame", 1, b"\x00", direction=RESPONSE, device=1)
+    unnamed.latency_ms = 0.5
+    agg.add([unnamed], n * 2)
+    assert set(agg.snapshot().latency_by_command) == {"CMD_FORCE_ACT..CMD_TEMP", "eg2-can"}
 
 
 def test_notes_of_outputs_are_shown_and_kept_for_the_end() -> None:
