@@ -187,6 +187,17 @@ def test_devices_never_read_show_a_dash_and_the_help_explains_the_gutter() -> No
             for device in ("2", "255"):
                 assert " none " not in rows[device], rows[device]
             assert " none " in rows["1"]  # its run state was read: no fault
+            await pilot.press("q")
+        app = capture_app(CAPTURES / "can_pick_place.log")
+        async with driving(app) as pilot:
+            await until(pilot, lambda: app.done)
+            panel = app.query_one(DevicePanel)
+            panel.redraw()
+            rows = {line.plain.split()[1]: line.plain for line in panel.lines[1:]}
+            for device in ("3", "16383"):  # asked, never answering; the broadcast ID
+                assert rows[device].rstrip().endswith("never"), rows[device]
+                assert " none " not in rows[device]
+            assert not rows["1"].rstrip().endswith("never")
             await pilot.press("question_mark")
             await until(pilot, lambda: isinstance(app.screen, HelpScreen))
             console = Console(record=True, width=100, file=io.StringIO())

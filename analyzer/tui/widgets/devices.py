@@ -8,7 +8,7 @@ On a narrow panel the columns a person watches stay (bus, ID, state, faults, lat
 then opening, force, temperature ...) and the others are left out (``columns_for``); a state or
 fault too long for its column is abbreviated (``SHORT_STATES``, ``SHORT_FAULTS``), never cut. A
 gripper whose state or faults were never read (one never heard, a broadcast ID) shows ``-``,
-not "none"."""
+not "none", and its age is "never": requests sent to it are not hearing from it."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from textual.strip import Strip
 from decoders.registers import FAULT_BITS
 
 from ...model import derived
+from ...tracker import READINGS
 from ..aggregates import DeviceKey, LatencyStats
 from ..messages import DeviceRow
 
@@ -237,7 +238,10 @@ class DevicePanel(ScrollView):
             bar.stylize(changed_style(mono - at), BAR_WIDTH + 1 if self._bar else 0)
         faults = v.get("fault_text") or []
         lat = self.latency.get((row.bus, row.device))
-        age = None if clock is None or row.t is None else max(0.0, clock - row.t)
+        # heard: it answered (a latency) or something of it was read; requests sent to it
+        # (one that never answers, a broadcast ID) are not hearing from it
+        heard = v.get("latency_ms") is not None or any(v.get(k) is not None for k in READINGS)
+        age = None if clock is None or row.t is None or not heard else max(0.0, clock - row.t)
         target = v.get("target_opening")
         return [
             row.bus,
