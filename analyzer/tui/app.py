@@ -170,6 +170,8 @@ class Eg2ScopeApp(App[int]):
         if event.worker.name != "session" or event.state != WorkerState.ERROR:
             return
         self.failure = event.worker.error
+        if self.closing:
+            return  # printed on exit all the same
         text = self.failure_text()
         self.notify(text, title="session failed", severity="error", timeout=3600)
         self.main_screen.query_one("#event-log", RichLog).write(
@@ -252,6 +254,8 @@ class Eg2ScopeApp(App[int]):
 
     @on(TabbedContent.TabActivated)
     def tab_activated(self) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.panels_stale = True
         self.show_panels()
 
@@ -326,6 +330,8 @@ class Eg2ScopeApp(App[int]):
 
     @on(RowSelected)
     def row_selected(self, event: RowSelected) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         # following a fast bus must not rebuild the tree per batch: it costs the session's
         # thread the GIL while a capture decodes
         self._detail_due = event.index
@@ -359,14 +365,20 @@ class Eg2ScopeApp(App[int]):
 
     @on(FieldSelected)
     def field_selected(self, event: FieldSelected) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.main_screen.query_one(HexPane).span = event.span
 
     @on(ByteSelected)
     def byte_selected(self, event: ByteSelected) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.main_screen.query_one(DetailTree).select_offset(event.offset)
 
     @on(JumpTo)
     def jump_to(self, event: JumpTo) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.go_to_index(event.index)
 
     def go_to_index(self, index: int) -> None:
