@@ -3,9 +3,12 @@
 ``Tracker.update(record)`` folds a record into its gripper's ``DeviceState`` and returns a
 ``StateSample`` when the record set anything (a reading, a setpoint, a command): the device panel,
 the Rerun timelines and the MCAP ``/state`` topics all read the samples, so every reading keeps its
-own time and nothing is downsampled. Only valid frames set values; a value outside its documented
-range is not folded in (it is flagged on the record instead), so one corrupt reading does not spike
-a plot. Counters (frames, errors, unanswered) move on every frame but are not readings.
+own time and nothing is downsampled. Only valid frames set values, and a frame with any value
+outside its documented range (flagged ``out_of_range`` on the record) sets none at all: a frame
+misread in one value is not trusted in the others (the manual's reply with opening 59395 does not
+make force 243 a reading), so one corrupt frame does not spike a plot. The command a request
+carries and a response's latency are still noted. Counters (frames, errors, unanswered) move on
+every frame but are not readings.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from collections.abc import Callable
 from typing import Any, Final
 
 from decoders.eg2_serial import Cmd
-from decoders.flags import UNANSWERED
+from decoders.flags import OUT_OF_RANGE, UNANSWERED
 from decoders.model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
 from decoders.registers import BY_NAME
 
@@ -122,7 +125,9 @@ class Tracker:
                 values["unanswered"] += 1
         elif rec.direction == RESPONSE and rec.latency_ms is not None:
             changed["latency_ms"] = rec.latency_ms
-        if rec.protocol == EG2_SERIAL:
+        if OUT_OF_RANGE in rec.flags:
+            pass  # a frame with a value out of range sets no value at all
+        elif rec.protocol == EG2_SERIAL:
             _serial(rec, changed)
         else:
             _registers(rec, changed)
@@ -147,8 +152,9 @@ _FOLD: Final[dict[str, tuple[str, int | None, int | None, bool]]] = {
 
 
 def _registers(rec: Record, changed: dict[str, Any]) -> None:
-    """Register values into the state, unless out of range or a request writes a read-only
-    register (both are flagged on the record, and the gripper ignores such a write)."""
+    """Register values into the state: none if any is out of its range, and not a request's
+    write of a read-only register (both are flagged on the record, and the gripper ignores
+    such a write)."""
     f = rec.fields
     request = rec.direction == REQUEST
     values = f.get("values")
@@ -157,16 +163,17 @@ def _registers(rec: Record, changed: dict[str, Any]) -> None:
             return
         values = {f["name"]: f["value"]}
     fold = _FOLD.get
+    found: dict[str, Any] = {}
     for name, value in values.items():
         spec = fold(name)
         if spec is None:
             continue
         attr, lo, hi, read_only = spec
-        if request and read_only:
-            continue
         if lo is not None and hi is not None and isinstance(value, int) and not lo <= value <= hi:
-            continue
-        changed[attr] = value
+            return  # one value out of range: the frame sets none
+        if not (request and read_only):
+            found[attr] = value
+    changed.update(found)
 
 
 def _catch(f: dict[str, Any], changed: dict[str, Any], continuous: bool) -> None:

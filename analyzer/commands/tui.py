@@ -5,21 +5,32 @@ from __future__ import annotations
 
 import argparse
 import sys
-from contextlib import ExitStack
+from contextlib import ExitStack, redirect_stderr
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..errors import UsageError
+from ..batches import ENGINES
+from ..errors import EXIT_ERROR, UsageError
 from ..listener import Listener
+from ..rerun_target import add_rerun_argument, rerun_listener
 from ..session import Session, SessionOptions
 from ..sources.live import Tap
 from ..sources.source import LiveSource
-from .common import CaptureOptions, byte_protocol, exit_code, open_reader, speed_type
+from .common import (
+    CaptureOptions,
+    byte_protocol,
+    exit_code,
+    open_reader,
+    protocol_type,
+    speed_type,
+)
 from .demo import add_demo_arguments
 from .livesource import add_source_arguments, open_taps
 from .session import add_session_arguments, byte_times, recorder
 
 if TYPE_CHECKING:
-    from ..tui.app import SessionPlan
+    from ..tui.app import Eg2ScopeApp, SessionPlan
+    from ..tui.notes import Notes
 
 TRIGGER_NAMES = ("error", "fault", "unanswered")
 
@@ -66,34 +77,63 @@ def add_subparser(sub: Any) -> None:
         help="freeze the view on the first such record (capture and recording go on); "
         "'x' re-arms it",
     )
+    parser.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="auto",
+        help="auto: the native core for CAN input where it is built, else Python (default); "
+        "python: the Python decoders and tracker; native: the native core (a usage error "
+        "where the input is not CAN or the core is not built)",
+    )
     add_source_arguments(parser)
     add_session_arguments(parser, record_required=False)
+    add_rerun_argument(parser)
     add_demo_arguments(parser)
     parser.set_defaults(func=run, device=None, errors_only=False, no_progress=True)
 
 
-def live_plan(
-    args: argparse.Namespace, taps: list[Tap], per_bus: dict[str, str], on_start: Any
-) -> SessionPlan:
-    from decoders.registry import resolve_protocol
+def session_protocol(args: argparse.Namespace) -> str | None:
+    """The byte protocol ``--protocol`` names (None: detected per stream): the command line's
+    name or alias (``serial``, ``modbus``, ``auto``) as the decoders know it."""
+    try:
+        return protocol_type(args.protocol or "auto")
+    except argparse.ArgumentTypeError as exc:
+        raise UsageError(f"--protocol: {exc}") from None
 
+
+def extra_listeners(args: argparse.Namespace, live: bool, notes: Notes) -> list[Listener]:
+    """``--rerun``: the Rerun listener ``record --rerun`` and ``live --rerun`` use. What it says
+    on stderr (where the .rrd went, the web viewer's address) goes to ``notes``: shown in the
+    TUI and printed again once the terminal is given back."""
+    with redirect_stderr(notes):  # the listener's output keeps the stream it is given
+        rerun = rerun_listener(args, source=args.output or args.file, live=live)
+    return [] if rerun is None else [rerun]
+
+
+def live_plan(
+    args: argparse.Namespace,
+    taps: list[Tap],
+    per_bus: dict[str, str],
+    on_start: Any,
+    extra: list[Listener] | None = None,
+) -> SessionPlan:
     from ..tui.app import SessionPlan
 
-    protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
     record: Listener | None = recorder(args.output, taps) if args.output else None
     options = SessionOptions(
-        protocol=protocol,
+        protocol=session_protocol(args),
         per_bus=per_bus,
         byte_time_s=byte_times(taps),
         duration=args.duration,
+        engine=getattr(args, "engine", "auto"),
     )
+    outputs = ([] if record is None else [record]) + list(extra or [])
 
     def build(feed: Listener) -> Session:
         source = LiveSource(taps, args.queue_size)
         if on_start is not None:
             source.on_started = on_start
-        listeners = [feed] if record is None else [record, feed]
-        return Session(source, listeners, options)
+        return Session(source, [*outputs, feed], options)
 
     names = ", ".join(t.bus for t in taps)
     return SessionPlan(
@@ -106,7 +146,9 @@ def live_plan(
     )
 
 
-def capture_plan(args: argparse.Namespace, stack: ExitStack) -> SessionPlan:
+def capture_plan(
+    args: argparse.Namespace, stack: ExitStack, extra: list[Listener] | None = None
+) -> SessionPlan:
     from ..tui.app import SessionPlan
     from ..tui.replay import ReplaySource
 
@@ -115,13 +157,14 @@ def capture_plan(args: argparse.Namespace, stack: ExitStack) -> SessionPlan:
             "-o records live sources; a capture is already recorded (export from the TUI "
             "with 'e' instead)"
         )
-    opts = CaptureOptions.from_args(args)
+    opts = replace(CaptureOptions.from_args(args), protocol=session_protocol(args))
     reader = stack.enter_context(open_reader(opts))
     source = ReplaySource(reader, opts.speed)
-    options = SessionOptions(protocol=byte_protocol(opts))
+    options = SessionOptions(protocol=byte_protocol(opts), engine=opts.engine)
+    outputs = list(extra or [])
 
     def build(feed: Listener) -> Session:
-        return Session(source, [feed], options)
+        return Session(source, [*outputs, feed], options)
 
     return SessionPlan(
         build, live=False, replay=source, freeze_on=args.freeze_on, title=f"capture: {opts.path}"
@@ -130,6 +173,7 @@ def capture_plan(args: argparse.Namespace, stack: ExitStack) -> SessionPlan:
 
 def run(args: argparse.Namespace) -> int:
     from ..tui.app import Eg2ScopeApp
+    from ..tui.notes import Notes
 
     if args.file and args.demo:
         raise UsageError("give a capture file or --demo, not both")
@@ -138,31 +182,46 @@ def run(args: argparse.Namespace) -> int:
             "the TUI needs a terminal; for text use 'eg2scope live', 'eg2scope demo' or "
             "'eg2scope decode'"
         )
+    notes = Notes()
     with ExitStack() as stack:
         if args.demo:
             from ..sim.rig import DemoRig
 
             rig = stack.enter_context(DemoRig(args.buses, noise=args.noise))
-            plan = live_plan(args, rig.taps, rig.protocols, rig.run_hosts)
+            extra = extra_listeners(args, live=True, notes=notes)
+            plan = live_plan(args, rig.taps, rig.protocols, rig.run_hosts, extra)
         elif args.file:
-            plan = capture_plan(args, stack)
+            plan = capture_plan(args, stack, extra_listeners(args, live=False, notes=notes))
         else:
-            plan = live_plan(args, open_taps(args), {}, None)
-        sessions: list[Session] = []
-        plan.on_done.append(sessions.append)
-        app = Eg2ScopeApp(plan)
+            taps = open_taps(args)
+            plan = live_plan(args, taps, {}, None, extra_listeners(args, live=True, notes=notes))
+        plan.notes = notes
+        try:
+            app = Eg2ScopeApp(plan)
+        except ValueError as exc:  # the session cannot be made (an engine that cannot apply)
+            raise UsageError(f"--engine {args.engine}: {exc}") from None
         app.run()
-        if app.session is not None and app.session not in sessions:
-            app.session.stop()  # the app ended another way (an error): close the session
-    if not sessions:
-        return 1
-    session = sessions[0]
+        app.stop_session()  # however the app ended: the session closes every listener
+    return finish(args, app, notes)
+
+
+def finish(args: argparse.Namespace, app: Eg2ScopeApp, notes: Notes) -> int:
+    """After the app has gone: what happened, on stderr, and the exit status."""
+    notes.print(sys.stderr)
+    session = app.session
     where = f" into {args.output}" if args.output else ""
     print(f"eg2scope: {session.counts.line()}{where}", file=sys.stderr)
     for listener, exc in session.detached:
         label = getattr(listener, "label", type(listener).__name__)
         print(f"eg2scope: error: {label} failed: {exc}", file=sys.stderr)
-    damaged = bool(session.source.errors)
     for err in session.source.errors:
         print(f"eg2scope: {args.file}: {err}", file=sys.stderr)
+    crashed = app.return_code not in (None, 0)  # the app itself (Textual printed the traceback)
+    if crashed:
+        print("eg2scope: error: the TUI failed (the traceback is above)", file=sys.stderr)
+    if app.failure is not None:
+        print(f"eg2scope: error: {app.failure_text()}", file=sys.stderr)
+    if crashed or app.failure is not None:
+        return EXIT_ERROR
+    damaged = bool(session.source.errors)
     return exit_code(session.counts, damaged=damaged, failed=bool(session.detached))

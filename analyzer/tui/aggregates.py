@@ -37,11 +37,18 @@ class ProblemGroup:
 
 @dataclass
 class LatencyStats:
-    count: int
+    count: int  # the latencies the percentiles are of: the last LATENCY_KEEP at most
     p50: float
     p95: float
     max: float
     histogram: list[int]  # counts in HISTOGRAM_BINS equal bins from 0 to max
+    total: int = 0  # every latency seen
+
+    def samples_text(self) -> str:
+        """How many latencies the figures are of: "1,234", or "last 2,000 of 15,300"."""
+        if self.total > self.count:
+            return f"last {self.count:,} of {self.total:,}"
+        return f"{self.count:,}"
 
 
 @dataclass
@@ -69,7 +76,8 @@ class Snapshot:
     registers: dict[DeviceKey, dict[str, RegisterSeen]] = field(default_factory=dict)
 
 
-def latency_stats(values: deque[float] | list[float]) -> LatencyStats | None:
+def latency_stats(values: deque[float] | list[float], total: int = 0) -> LatencyStats | None:
+    """Percentiles and a histogram of ``values`` (the last of ``total`` seen)."""
     if not values:
         return None
     ordered = sorted(values)
@@ -80,7 +88,8 @@ def latency_stats(values: deque[float] | list[float]) -> LatencyStats | None:
         bins = [b - a for a, b in pairwise([0, *edges, n])]
     else:
         bins = [n] + [0] * (HISTOGRAM_BINS - 1)
-    return LatencyStats(n, ordered[n // 2], ordered[min(n - 1, int(n * 0.95))], top, bins)
+    p95 = ordered[min(n - 1, int(n * 0.95))]
+    return LatencyStats(n, ordered[n // 2], p95, top, bins, max(total, n))
 
 
 class Aggregates:
@@ -90,6 +99,7 @@ class Aggregates:
         self.problems: dict[tuple[str, str, int | None], ProblemGroup] = {}
         self.latency_command: dict[str, deque[float]] = {}
         self.latency_device: dict[DeviceKey, deque[float]] = {}
+        self.latency_seen: dict[Any, int] = {}  # per command name and per gripper: every one
         self.registers: dict[DeviceKey, dict[str, RegisterSeen]] = {}
         # percentiles sort up to LATENCY_KEEP values: redone only for the keys that got new ones
         self.stats_command: dict[str, LatencyStats] = {}
@@ -103,6 +113,7 @@ class Aggregates:
         names = ("flags", "kind", "device", "errors", "bus", "latency_ms", "direction", "name")
         rows = zip(*(column(records, n) for n in names), strict=True)
         frames = []  # (index in the batch, bus, device) of the valid frames of a gripper
+        protocols: list[str] | None = None
         for k, (flags, kind, device, errors, bus, latency, direction, name) in enumerate(rows):
             if flags:
                 self._problems(flags, bool(errors), bus, device, first_index + k)
@@ -111,7 +122,9 @@ class Aggregates:
             key = (bus, device)
             frames.append((k, key))
             if latency is not None and direction == RESPONSE:
-                name = name or "?"
+                if not name:  # as the frame list names it: by its protocol
+                    protocols = protocols or column(records, "protocol")
+                    name = protocols[k]
                 self._latency(self.latency_command, name, latency)
                 self._latency(self.latency_device, key, latency)
                 self._dirty_command.add(name)
@@ -136,12 +149,13 @@ class Aggregates:
             else:
                 group.count += 1
 
-    @staticmethod
-    def _latency(table: dict[Any, deque[float]], key: Any, value: float) -> None:
+    def _latency(self, table: dict[Any, deque[float]], key: Any, value: float) -> None:
         values = table.get(key)
         if values is None:
             values = table[key] = deque(maxlen=LATENCY_KEEP)
         values.append(value)
+        seen = self.latency_seen
+        seen[key] = seen.get(key, 0) + 1
 
     def _registers(
         self,
@@ -191,12 +205,11 @@ class Aggregates:
         snap.latency_by_device = dict(self.stats_device)
         return snap
 
-    @staticmethod
     def _update_stats(
-        values: dict[Any, deque[float]], stats: dict[Any, LatencyStats], dirty: set[Any]
+        self, values: dict[Any, deque[float]], stats: dict[Any, LatencyStats], dirty: set[Any]
     ) -> None:
         for key in dirty:
-            found = latency_stats(values[key])
+            found = latency_stats(values[key], self.latency_seen.get(key, 0))
             if found is not None:
                 stats[key] = found
         dirty.clear()

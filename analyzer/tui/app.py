@@ -1,39 +1,46 @@
 """The TUI application: the panes, the keys, and one session on a worker thread.
 
-The session (live taps or a capture) runs in a Textual thread worker; the ``TuiFeed`` listener
-fills the store on that thread and posts a ``FeedUpdate`` 10-20 times a second. Pausing the
-view never pauses capture or recording; quitting stops the session and waits for it to close
-every listener, so a recording is complete when the app has gone.
+The session (live taps or a capture) is made with the app and runs in a Textual thread
+worker; the ``TuiFeed`` listener fills the store on that thread and posts a ``FeedUpdate``
+10-20 times a second. Pausing the view never pauses capture or recording; quitting stops the
+session and waits for it to close every listener, so a recording is complete when the app has
+gone. The app ending any other way (a crash) stops the session too. A session thread that
+raises is shown at once (a notification, the status line, the events tab) and kept in
+``failure``: ``eg2scope tui`` prints it and exits 1.
 """
 
 from __future__ import annotations
 
 import re
 import time
+import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from textual import on, work
+from textual import events, on, work
 from textual.app import App, ComposeResult, SystemCommand
 from textual.binding import BindingType
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.timer import Timer
 from textual.widgets import Footer, Input, RichLog, Static, TabbedContent, TabPane
+from textual.worker import Worker, WorkerState
 
-from ..model import LEVEL_NAMES, SourceEvent
+from ..model import ERROR, LEVEL_NAMES, SourceEvent
 from ..session import Session
 from . import keys
 from .aggregates import Snapshot
 from .export import export, export_format
 from .feed import TRIGGERS, TuiFeed
 from .filter import FilterError, parse
+from .layout import HEIGHT_BREAKPOINTS, WIDTH_BREAKPOINTS
 from .messages import ByteSelected, FeedUpdate, FieldSelected, JumpTo, RowSelected
+from .notes import Notes
 from .replay import ReplaySource, next_speed, speed_text
 from .rows import TimeMode
-from .screens import HelpScreen, LetterScreen, PromptScreen
+from .screens import HelpScreen, PromptScreen
 from .store import RecordStore
 from .widgets.detail import DetailTree, HexPane
 from .widgets.devices import DevicePanel
@@ -52,7 +59,7 @@ class SessionPlan:
     """How the app gets its session: ``build(feed)`` makes it with the feed among its
     listeners. ``live``: taps (ages by the wall clock) or a capture; ``replay``: the capture
     source, for pause and speed; ``recorder``: where marks go; ``freeze_on``: the armed
-    trigger; ``title``: what is watched."""
+    trigger; ``title``: what is watched; ``notes``: what outputs say while the app runs."""
 
     build: Callable[[TuiFeed], Session]
     live: bool = True
@@ -61,7 +68,7 @@ class SessionPlan:
     recording_path: str | None = None
     freeze_on: str | None = None
     title: str = "eg2scope"
-    on_done: list[Callable[[Session], None]] = field(default_factory=list)
+    notes: Notes | None = None
 
 
 class Eg2ScopeApp(App[int]):
@@ -70,14 +77,23 @@ class Eg2ScopeApp(App[int]):
     CSS_PATH = "eg2scope.tcss"
     TITLE = "eg2scope"
     BINDINGS: ClassVar[list[BindingType]] = list(keys.bindings())
+    # Textual declares these without ClassVar (mypy would refuse one)
+    HORIZONTAL_BREAKPOINTS = list(WIDTH_BREAKPOINTS)  # noqa: RUF012
+    VERTICAL_BREAKPOINTS = list(HEIGHT_BREAKPOINTS)  # noqa: RUF012
 
     def __init__(self, plan: SessionPlan, store: RecordStore | None = None) -> None:
+        """Makes the session (ValueError: it cannot be made, e.g. an engine that does not
+        apply); it starts when the app does."""
         super().__init__()
         self.plan = plan
         self.store = store if store is not None else RecordStore()
-        self.feed = TuiFeed(self.store)
+        self.feed = TuiFeed(self.store, live=plan.live)
         self.feed.recorder = plan.recorder
-        self.session: Session | None = None
+        session = self.session = plan.build(self.feed)
+        self.feed.states = lambda: session.tracker.states
+        self.feed.counts = lambda: (session.counts.items, session.source.dropped)
+        self.failure: BaseException | None = None  # what the session's thread raised
+        self.awaiting_letter: tuple[str, Callable[[str], None]] | None = None  # m, '
         self.done = False
         self.captured = 0
         self.dropped = 0
@@ -114,6 +130,7 @@ class Eg2ScopeApp(App[int]):
                 yield LatencyPanel(id="latency-panel")
             with TabPane("Events", id="events"):
                 yield RichLog(id="event-log", max_lines=2000, markup=False)
+        yield Static("", id="letter-prompt")
         yield Footer()
 
     @property
@@ -128,6 +145,12 @@ class Eg2ScopeApp(App[int]):
     def on_mount(self) -> None:
         self.main_screen.query_one("#filter", Input).display = False
         self.main_screen.query_one("#filter-error", Static).display = False
+        self.main_screen.query_one("#letter-prompt", Static).display = False
+        if self.plan.notes is not None:
+            notes = self.plan.notes
+            for line in notes.lines:
+                self.notify(line, timeout=10)
+            notes.show = lambda line: self.call_from_thread(self.notify, line, timeout=10)
         self.frames.focus()
         self.feed.target = self
         if self.trigger:
@@ -141,19 +164,58 @@ class Eg2ScopeApp(App[int]):
 
     @work(thread=True, exclusive=True, name="session", exit_on_error=False)
     def run_session(self) -> None:
-        session = self.plan.build(self.feed)
-        self.session = session
-        self.feed.states = lambda: session.tracker.states
-        self.feed.counts = lambda: (session.counts.items, session.source.dropped)
-        session.run()
-        for done in self.plan.on_done:
-            done(session)
+        self.session.run()
+
+    def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
+        if event.worker.name != "session" or event.state != WorkerState.ERROR:
+            return
+        self.failure = event.worker.error
+        if self.closing:
+            return  # printed on exit all the same
+        text = self.failure_text()
+        self.notify(text, title="session failed", severity="error", timeout=3600)
+        self.main_screen.query_one("#event-log", RichLog).write(
+            self._event_line(SourceEvent(time.time(), "session", ERROR, text, "failed"))
+        )
+        self.done = True
+        self.show_status()
+
+    def failure_text(self) -> str:
+        """The session thread's failure in words, with where it happened."""
+        exc = self.failure
+        if exc is None:
+            return ""
+        where = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []
+        at = f" (at {Path(where[0].filename).name}:{where[0].lineno})" if where else ""
+        return f"the session failed: {type(exc).__name__}: {exc}{at}"
+
+    def stop_session(self) -> None:
+        """Ask the session to end (from any thread; it closes every listener as it ends)."""
+        self.session.stop()
+        if self.plan.replay is not None:
+            self.plan.replay.resume()  # a paused replay must see the stop
+
+    def on_unmount(self) -> None:
+        # however the app ends (a crash too): the session's thread must end, or leaving the
+        # event loop would wait for it forever
+        self.stop_session()
 
     def clock(self) -> float | None:
         """Ages are measured on the wall clock live, on the capture's own clock otherwise."""
         return time.time() if self.plan.live else self.store.t_last
 
+    @property
+    def closing(self) -> bool:
+        """The app is being taken down: its widgets may be gone already (timers and the
+        feed's last updates must not look for them)."""
+        if self._exit or not self.screen_stack:
+            return True
+        screen = self.main_screen
+        return not screen.is_attached or not screen.children
+
     def on_feed_update(self, update: FeedUpdate) -> None:
+        if self.closing:
+            return
         self.captured, self.dropped = update.captured, update.dropped
         self.frames.take_new(update.count)
         self.main_screen.query_one(DevicePanel).take(update.devices, update.changed)
@@ -171,6 +233,8 @@ class Eg2ScopeApp(App[int]):
 
     def show_panels(self) -> None:
         """Redraw the visible panel (``PANELS_S``; hidden ones are drawn when shown)."""
+        if self.closing:
+            return
         active = self.main_screen.query_one(TabbedContent).active
         snap = self.snapshot
         if active == "devices":
@@ -190,6 +254,8 @@ class Eg2ScopeApp(App[int]):
 
     @on(TabbedContent.TabActivated)
     def tab_activated(self) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.panels_stale = True
         self.show_panels()
 
@@ -219,10 +285,12 @@ class Eg2ScopeApp(App[int]):
     def status_text(self) -> str:
         frames = self.frames
         parts = []
-        if self.plan.replay is not None:
+        if self.failure is not None:
+            parts.append("SESSION FAILED (see Events; q quits)")
+        elif self.plan.replay is not None:
             replay = self.plan.replay
-            filled = int(replay.position * 20)
-            bar = "█" * filled + "░" * (20 - filled)
+            filled = int(replay.position * 10)
+            bar = "█" * filled + "░" * (10 - filled)
             state = "paused" if replay.paused else "done" if self.done else "playing"
             parts.append(f"replay {state} {speed_text(replay.speed)} {bar} {replay.position:.0%}")
         elif self.done:
@@ -233,9 +301,12 @@ class Eg2ScopeApp(App[int]):
             parts.append("following")
         else:
             parts.append(f"paused, {frames.new_while_paused:,} new")
-        shown = frames.row_count
-        total = self.store.count
-        parts.append(f"{total:,} records" if shown == total else f"{shown:,} of {total:,} shown")
+        # what the list has taken in: the store may hold a batch more until the next update
+        if frames.filter is None:
+            parts.append(f"{frames.known:,} records")
+        else:
+            shown = f"{frames.row_count:,} of {frames.known:,} shown"
+            parts.append(f"{shown} (filter: {frames.filter.text})")
         if self.dropped:
             parts.append(f"{self.dropped:,} DROPPED")
         if frames.marks:
@@ -248,6 +319,8 @@ class Eg2ScopeApp(App[int]):
         return " | ".join(parts)
 
     def show_status(self) -> None:
+        if self.closing:
+            return
         text = self.status_text()
         if text != self._status:  # one line of fixed height: no layout needed
             self._status = text
@@ -257,6 +330,8 @@ class Eg2ScopeApp(App[int]):
 
     @on(RowSelected)
     def row_selected(self, event: RowSelected) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         # following a fast bus must not rebuild the tree per batch: it costs the session's
         # thread the GIL while a capture decodes
         self._detail_due = event.index
@@ -266,7 +341,7 @@ class Eg2ScopeApp(App[int]):
 
     def _apply_detail(self) -> None:
         self._detail_timer = None
-        if self.screen_stack:  # the timer can outlive the screens when the app quits
+        if not self.closing:  # the timer can outlive the screens when the app quits
             self._show_detail(self._detail_due)
 
     def _show_detail(self, index: int | None) -> None:
@@ -290,14 +365,20 @@ class Eg2ScopeApp(App[int]):
 
     @on(FieldSelected)
     def field_selected(self, event: FieldSelected) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.main_screen.query_one(HexPane).span = event.span
 
     @on(ByteSelected)
     def byte_selected(self, event: ByteSelected) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.main_screen.query_one(DetailTree).select_offset(event.offset)
 
     @on(JumpTo)
     def jump_to(self, event: JumpTo) -> None:
+        if self.closing:  # a message that comes in while the app is taken down
+            return
         self.go_to_index(event.index)
 
     def go_to_index(self, index: int) -> None:
@@ -314,14 +395,14 @@ class Eg2ScopeApp(App[int]):
     async def action_quit(self) -> None:
         """Stop the session and wait until every listener (the recording) is closed."""
         self.notify("closing the session ...")
-        if self.session is not None:
-            self.session.stop()
-        if self.plan.replay is not None:
-            self.plan.replay.resume()  # a paused replay must see the stop
+        self.stop_session()
         for worker in self.workers:
             if worker.name == "session":
-                await worker.wait()
-        self.exit(0)
+                try:
+                    await worker.wait()
+                except Exception:
+                    pass  # what the session raised is in self.failure already
+        self.exit(0)  # a session failure is in self.failure (exit status 1)
 
     def action_help(self) -> None:
         self.push_screen(HelpScreen())
@@ -346,13 +427,19 @@ class Eg2ScopeApp(App[int]):
         box.display = True
         box.focus()
 
+    def applied_filter_text(self) -> str:
+        applied = self.frames.filter
+        return "everything is shown" if applied is None else f"still applied: {applied.text}"
+
     @on(Input.Changed, "#filter")
     def filter_changed(self, event: Input.Changed) -> None:
         error = self.main_screen.query_one("#filter-error", Static)
         try:
             parse(event.value)
         except FilterError as exc:
-            error.update(f"{' ' * exc.position}^ {exc.message}")
+            error.update(
+                f"{' ' * exc.position}^ {exc.message} (not applied; {self.applied_filter_text()})"
+            )
             error.display = True
             event.input.add_class("-invalid")
             return
@@ -363,8 +450,12 @@ class Eg2ScopeApp(App[int]):
     def filter_submitted(self, event: Input.Submitted) -> None:
         try:
             compiled = parse(event.value)
-        except FilterError:
-            return  # the error is shown under the line
+        except FilterError as exc:
+            self.notify(
+                f"the filter is not applied: {exc.message}; {self.applied_filter_text()}",
+                severity="warning",
+            )
+            return  # the error stays under the line
         self.frames.set_filter(compiled)
         if compiled is None:
             event.input.display = False
@@ -422,16 +513,46 @@ class Eg2ScopeApp(App[int]):
         frames.restyle()
         self.show_status()
 
+    # -- marks: m or ' and then a letter -------------------------------------------------------
+    # The letter is taken in ``on_event``, before any widget sees it: the m/' bindings are
+    # priority bindings, run as the app takes the key from the terminal, so the next key (typed
+    # 50 ms later, or in the same read) is always the letter, however busy the screen is.
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in ("set_mark", "goto_mark"):
+            return self.screen is self.main_screen  # not over the help or a prompt
+        return True
+
     def action_set_mark(self) -> None:
-        self.push_screen(LetterScreen("mark this frame: press a letter"), self._set_mark)
+        self._await_letter("mark this frame: press a letter (Esc cancels)", self._set_mark)
 
     def action_goto_mark(self) -> None:
-        self.push_screen(LetterScreen("go to mark: press a letter"), self._goto_mark)
+        self._await_letter("go to mark: press a letter (Esc cancels)", self._goto_mark)
 
-    def _set_mark(self, letter: str | None) -> None:
+    def _await_letter(self, prompt: str, then: Callable[[str], None]) -> None:
+        self.awaiting_letter = (prompt, then)
+        label = self.main_screen.query_one("#letter-prompt", Static)
+        label.update(prompt)
+        label.display = True
+
+    async def on_event(self, event: events.Event) -> None:
+        if isinstance(event, events.Key) and self.awaiting_letter is not None:
+            _, then = self.awaiting_letter
+            self.awaiting_letter = None
+            self.main_screen.query_one("#letter-prompt", Static).display = False
+            letter = event.character or ""
+            if len(letter) == 1 and letter.isalpha():
+                then(letter)
+            else:
+                self.notify("no letter: cancelled")
+            return
+        await super().on_event(event)
+
+    def _set_mark(self, letter: str) -> None:
         frames = self.frames
         index = frames.selected
-        if not letter or index is None:
+        if index is None:
+            self.notify("no frame to mark")
             return
         frames.marks[letter] = index
         frames.restyle()
@@ -440,9 +561,7 @@ class Eg2ScopeApp(App[int]):
         self.notify(f"mark {letter} on #{seq}" + (" (saved in the recording)" if saved else ""))
         self.show_status()
 
-    def _goto_mark(self, letter: str | None) -> None:
-        if not letter:
-            return
+    def _goto_mark(self, letter: str) -> None:
         if letter in self.frames.marks:
             self.go_to_index(self.frames.marks[letter])
         else:
@@ -536,6 +655,10 @@ class Eg2ScopeApp(App[int]):
         self.export_note = f"exported {n:,} records to {Path(path).name}"
         self.call_from_thread(self.notify, self.export_note)
 
+    def action_toggle_detail(self) -> None:
+        screen = self.main_screen
+        screen.toggle_class("-show-detail" if screen.has_class("-narrow") else "-hide-detail")
+
     def action_tab(self, name: str) -> None:
         self.main_screen.query_one(TabbedContent).active = name
 
@@ -546,8 +669,8 @@ class Eg2ScopeApp(App[int]):
                 continue
             title = key.description.split(":")[0].split(" (")[0]
             yield SystemCommand(
-                title.capitalize(),
-                f"{key.description} [{keys.shown_keys(key)}]",
+                keys.literal(title.capitalize()),
+                keys.literal(f"{key.description} [{keys.shown_keys(key)}]"),
                 lambda action=key.action: self.run_action(action),
             )
 

@@ -3,6 +3,9 @@ thread, and posts one ``FeedUpdate`` to the app every ``POST_INTERVAL_S`` (never
 per record). It also carries the app's requests back to the session's thread: marks to write
 into the recording, which only that thread may write.
 
+Records reach the store in capture-time order across buses (``timeorder.TimeMerge``; within
+a bus in stream order), so the frame list's time column never runs backwards.
+
 The trigger (``--freeze-on``) is checked here, on every record as it is stored, so the first
 match is found even when a batch holds thousands of records.
 
@@ -26,6 +29,7 @@ from ..model import SourceEvent, StateSample
 from .aggregates import Aggregates
 from .messages import DeviceRow, FeedUpdate
 from .store import RecordStore
+from .timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 
 POST_INTERVAL_S: Final = 0.1  # 10 updates a second
 PANELS_INTERVAL_S: Final = 1.0  # the panels' tables (problems, registers, latency) this often
@@ -50,9 +54,12 @@ class TuiFeed(Listener):
     tracker's states, read on the session's thread only."""
 
     wants_states = False
+    wants_raw = True  # the input tells the time order which buses are still to be heard from
 
-    def __init__(self, store: RecordStore | None = None) -> None:
+    def __init__(self, store: RecordStore | None = None, live: bool = False) -> None:
         self.store = store if store is not None else RecordStore()
+        self.live = live  # records are timed by the wall clock: quiet buses age by it
+        self.merge = TimeMerge(LIVE_HOLD_S if live else CAPTURE_HOLD_S)
         self.aggregates = Aggregates()
         self.label = "the TUI"
         self.target: Poster | None = None
@@ -90,6 +97,11 @@ class TuiFeed(Listener):
     # -- the listener (the session's thread) -------------------------------------------------
 
     def on_records(self, records: Sequence[Record]) -> None:
+        self._store(self.merge.push(records, time.time() if self.live else None))
+
+    def _store(self, records: Sequence[Record]) -> None:
+        if not records:
+            return
         first = self.store.count
         self.store.append(records)
         self.aggregates.add(records, first)
@@ -103,6 +115,9 @@ class TuiFeed(Listener):
                         self.trigger = None  # one shot: the user re-arms
                     break
 
+    def on_raw(self, items: list[Any]) -> None:
+        self.merge.hear(items)
+
     def on_states(self, samples: Sequence[StateSample]) -> None:
         changed = self._changed
         for s in samples:
@@ -113,12 +128,15 @@ class TuiFeed(Listener):
         self._events.append(event)
 
     def tick(self, now: float) -> None:
+        if self.merge.held:
+            self._store(self.merge.advance(now if self.live else None))
         self._write_marks()
         mono = time.monotonic()
         if mono >= self._next_post:
             self._post(mono)
 
     def close(self) -> None:
+        self._store(self.merge.flush())
         self._write_marks()
         self.closed = True
         self._post(time.monotonic(), done=True)

@@ -18,6 +18,9 @@ class Key:
     description: str
     footer: bool = False
     shown: str = ""  # how the help writes the key, when not the key names
+    # taken as the app reads the key, before any widget (the m/' of marks: the letter that
+    # follows must find the app waiting for it); not while a text box takes the key
+    priority: bool = False
 
 
 KEYS: Final[tuple[Key, ...]] = (
@@ -32,8 +35,8 @@ KEYS: Final[tuple[Key, ...]] = (
     Key("p", "pair", "jump to the paired request/response", True),
     Key("t", "time_reference", "set/clear the time reference on this frame", False),
     Key("T", "time_mode", "time column: relative, absolute, delta, reference", True),
-    Key("m", "set_mark", "mark this frame: m then a letter", False),
-    Key("apostrophe", "goto_mark", "jump to a mark: ' then a letter", False, "'"),
+    Key("m", "set_mark", "mark this frame: m then a letter", False, priority=True),
+    Key("apostrophe", "goto_mark", "jump to a mark: ' then a letter", False, "'", priority=True),
     Key("ctrl+g", "goto", "go to a frame number or a time (t=12.5)", False),
     Key("x", "arm_trigger", "arm/disarm the trigger (freeze on the first match)", False),
     Key("plus,equals_sign", "faster", "replay faster (1x 2x 5x 10x max)", False, "+"),
@@ -44,6 +47,7 @@ KEYS: Final[tuple[Key, ...]] = (
     Key("3", "tab('registers')", "register watch of the selected gripper", False),
     Key("4", "tab('latency')", "latency per command", False),
     Key("5", "tab('events')", "source events", False),
+    Key("d", "toggle_detail", "detail pane: hide/show (narrow: swap with the list)", False),
     Key("tab", "focus_next", "next pane (frames, detail, hex, panels)", False),
     Key("ctrl+t", "toggle_dark", "light/dark theme", False),
     Key("ctrl+p", "command_palette", "command palette: every action", False),
@@ -66,10 +70,18 @@ def bindings() -> list[BindingType]:
             k.action,
             k.description.split(":")[0].split(" (")[0],
             show=k.footer,
+            priority=k.priority,
             id=f"eg2scope.{k.action.split('(')[0]}.{k.keys.split(',')[0]}",
         )
         for k in KEYS
     ]
+
+
+def literal(text: str) -> str:
+    """``text`` as Textual markup that shows it as it is: the command palette reads its help as
+    markup, where "[/ f]" is a closing tag and "[End G]" a style (textual.markup.escape
+    passes both)."""
+    return text.replace("[", "\\[")
 
 
 def shown_keys(k: Key) -> str:

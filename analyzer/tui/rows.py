@@ -1,9 +1,12 @@
 """One stored record as one line of the frame list: time, bus, direction, device, the manual's
 name, the summary with units, latency; coloured by severity and flag codes, never by text.
+Column widths follow the list's width (``layout.row_layout``); whatever is cut ends in ``…``.
 
 ```
-   1234  12.345678 can0   → ID 1  CMD_OPENLEN_SET            write target_opening=0   0.41 ms
+   1234    12.345678 can0   → ID 1     CMD_OPENLEN_SET          write target_opening=0  0.41 ms
 ```
+
+The gutter before the number marks problems (``MARKERS``), or the letter of a mark.
 """
 
 from __future__ import annotations
@@ -18,12 +21,11 @@ from rich.text import Text
 
 from decoders import flags as F
 
+from .layout import RowLayout, row_layout
 from .store import ERROR, WARNING, RecordStore
 
 ARROWS: Final = ("·", "→", "←")  # by the store's direction column
-NAME_WIDTH: Final = 28
-BUS_WIDTH: Final = 6
-TIME_WIDTH: Final = 15
+ELLIPSIS: Final = "…"
 
 STYLE_ERROR: Final = Style(color="red", bold=True)
 STYLE_WARNING: Final = Style(color="yellow")
@@ -35,6 +37,28 @@ STYLE_SEQ: Final = Style(dim=True)
 STYLE_LATENCY: Final = Style(color="green")
 STYLE_REF: Final = Style(color="black", bgcolor="cyan", bold=True)
 STYLE_MATCH: Final = Style(color="black", bgcolor="yellow")
+
+# the gutter's markers, most serious first (the help screen lists them from here)
+MARKER_ERROR: Final = "!"
+MARKER_UNANSWERED: Final = "?"
+MARKER_ORPHAN: Final = "¿"
+MARKER_RETRANSMISSION: Final = "↻"
+MARKER_WARNING: Final = "⚠"
+MARKERS: Final = (
+    (MARKER_ERROR, "an error: bad checksum or CRC, garbage, a truncated or malformed frame"),
+    (MARKER_UNANSWERED, "a request that got no response"),
+    (MARKER_ORPHAN, "a response with no request before it"),
+    (MARKER_RETRANSMISSION, "the same request sent again before the first was answered"),
+    (MARKER_WARNING, "a warning: a value out of range, a timing rule broken, ..."),
+    ("a-z", "a mark set with m (jump to it with ')"),
+)
+
+
+def fit(text: str, width: int) -> str:
+    """``text`` in exactly ``width`` cells: padded, or cut with an ellipsis."""
+    if len(text) <= width:
+        return text.ljust(width)
+    return text[: max(0, width - 1)] + ELLIPSIS if width > 0 else ""
 
 
 class TimeMode(Enum):
@@ -56,22 +80,23 @@ def format_time(
     mode: TimeMode,
     previous: int | None = None,
     reference: float | None = None,
+    width: int = 15,
 ) -> str:
-    """The time column of record ``i`` (``TIME_WIDTH`` characters)."""
+    """The time column of record ``i`` (at least ``width`` characters)."""
     t = store.t[i]
     if math.isnan(t):
-        return "-".rjust(TIME_WIDTH)
+        return "-".rjust(width)
     if mode is TimeMode.ABSOLUTE:
         if t > 1e8:  # an epoch time: the time of day is what a person reads
             clock = time.strftime("%H:%M:%S", time.localtime(t))
-            return f"{clock}.{int(t % 1 * 1e6):06d}".rjust(TIME_WIDTH)
-        return f"{t:{TIME_WIDTH}.6f}"
+            return f"{clock}.{int(t % 1 * 1e6):06d}".rjust(width)
+        return f"{t:{width}.6f}"
     if mode is TimeMode.DELTA:
         before = store.t[previous] if previous is not None else math.nan
-        return f"{0.0 if math.isnan(before) else t - before:+{TIME_WIDTH}.6f}"
+        return f"{0.0 if math.isnan(before) else t - before:+{width}.6f}"
     if mode is TimeMode.REFERENCE and reference is not None:
-        return f"{t - reference:+{TIME_WIDTH}.6f}"
-    return f"{t - (store.t0 if store.t0 is not None else t):{TIME_WIDTH}.6f}"
+        return f"{t - reference:+{width}.6f}"
+    return f"{t - (store.t0 if store.t0 is not None else t):{width}.6f}"
 
 
 def row_style(store: RecordStore, i: int) -> tuple[Style | None, str]:
@@ -80,15 +105,15 @@ def row_style(store: RecordStore, i: int) -> tuple[Style | None, str]:
     mask = store.flags[i]
     bits = store.flag_bits
     if sev == ERROR:
-        return STYLE_ERROR, "!"
+        return STYLE_ERROR, MARKER_ERROR
     if mask & bits.get(F.UNANSWERED):
-        return STYLE_UNANSWERED, "?"
+        return STYLE_UNANSWERED, MARKER_UNANSWERED
     if mask & bits.get(F.ORPHAN_RESPONSE):
-        return STYLE_ORPHAN, "¿"
+        return STYLE_ORPHAN, MARKER_ORPHAN
     if mask & bits.get(F.RETRANSMISSION):
-        return STYLE_DIM, "↻"
+        return STYLE_DIM, MARKER_RETRANSMISSION
     if sev == WARNING:
-        return STYLE_WARNING, "⚠"
+        return STYLE_WARNING, MARKER_WARNING
     if mask & bits.get(F.FOREIGN):
         return STYLE_DIM, " "
     return None, " "
@@ -102,32 +127,37 @@ def render_row(
     reference: float | None = None,
     is_reference: bool = False,
     mark: str = "",
+    layout: RowLayout | None = None,
 ) -> Text:
-    """Record ``i`` as one line of text (styles applied; the caller adds the cursor)."""
+    """Record ``i`` as one line of text in ``layout``'s widths (styles applied; the caller
+    adds the cursor)."""
+    cols = layout or row_layout(200)
     style, marker = row_style(store, i)
     device = store.device_of(i)
-    who = f"ID {device}" if device is not None else "-"
     text = Text(no_wrap=True, overflow="ellipsis")
     text.append(f"{mark or marker:1}", style or STYLE_SEQ)
-    text.append(f"{store.seq[i]:>7} ", STYLE_SEQ)
+    if cols.seq:
+        text.append(f"{store.seq[i]:>{cols.seq}} ", STYLE_SEQ)
     time_text = (
-        "*REF*".rjust(TIME_WIDTH)
+        "*REF*".rjust(cols.time)
         if is_reference
-        else format_time(store, i, mode, previous, reference)
+        else format_time(store, i, mode, previous, reference, cols.time)
     )
     text.append(time_text, STYLE_REF if is_reference else STYLE_TIME)
-    text.append(f" {store.bus_of(i)[:BUS_WIDTH]:{BUS_WIDTH}} {ARROWS[store.direction[i]]} ")
-    text.append(f"{who:7} ")
-    name = store.name_of(i)
-    text.append(f"{name[:NAME_WIDTH]:{NAME_WIDTH}} ", style or Style(bold=True))
+    text.append(f" {fit(store.bus_of(i), cols.bus)} {ARROWS[store.direction[i]]} ")
+    text.append(fit("-" if device is None else f"ID {device}", cols.device) + " ")
+    text.append(fit(store.name_of(i), cols.name) + " ", style or Style(bold=True))
     text.append(store.summary[i], style)
     latency = store.latency_ms(i)
     if latency is not None and store.direction[i] == 2:
         about = "~" if store.flags[i] & store.flag_bits.get(F.ESTIMATED_TIME) else ""
         text.append(f"  {about}{latency:.2f} ms", STYLE_LATENCY)
+    text.truncate(cols.width, overflow="ellipsis")
     return text
 
 
-def plain_row(store: RecordStore, i: int, mode: TimeMode = TimeMode.RELATIVE) -> str:
-    """The row as plain text (search, tests)."""
-    return render_row(store, i, mode).plain
+def plain_row(
+    store: RecordStore, i: int, mode: TimeMode = TimeMode.RELATIVE, width: int = 200
+) -> str:
+    """The row as plain text, ``width`` cells at most (search, tests)."""
+    return render_row(store, i, mode, layout=row_layout(width)).plain

@@ -1,4 +1,5 @@
-"""The TUI's modal screens: help (every key) and a one-line prompt (go-to, export, search)."""
+"""The TUI's modal screens: help (every key, the list's gutter markers) and a one-line prompt
+(go-to, export, search)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,11 @@ from rich.table import Table
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Vertical, VerticalScroll
-from textual.events import Key
 from textual.screen import ModalScreen
 from textual.widgets import Input, Label, Static
 
 from .keys import help_lines
+from .rows import MARKERS
 
 
 class HelpScreen(ModalScreen[None]):
@@ -23,7 +24,8 @@ class HelpScreen(ModalScreen[None]):
     DEFAULT_CSS = """
     HelpScreen { align: center middle; }
     HelpScreen > VerticalScroll {
-        width: 90; height: 80%; border: thick $accent; background: $panel; padding: 0 1;
+        width: 90; max-width: 100%; height: 80%; border: thick $accent; background: $panel;
+        padding: 0 1;
     }
     """
 
@@ -33,8 +35,14 @@ class HelpScreen(ModalScreen[None]):
         table.add_column("what it does")
         for keys, what in help_lines():
             table.add_row(keys, what)
+        markers = Table(title="the frame list's gutter", box=None, expand=True)
+        markers.add_column("mark", style="bold", no_wrap=True)
+        markers.add_column("what it means")
+        for mark, what in MARKERS:
+            markers.add_row(mark, what)
         with VerticalScroll():
             yield Static(table)
+            yield Static(markers)
             yield Static(
                 "Filter: dev == 1 and bus == can0 · name ~ CATCH · flag == unanswered · "
                 "latency > 5 · errors · not foreign.  Esc closes.",
@@ -52,7 +60,8 @@ class PromptScreen(ModalScreen[str | None]):
     DEFAULT_CSS = """
     PromptScreen { align: center middle; }
     PromptScreen > Vertical {
-        width: 70; height: auto; border: thick $accent; background: $panel; padding: 0 1;
+        width: 70; max-width: 100%; height: auto; border: thick $accent; background: $panel;
+        padding: 0 1;
     }
     PromptScreen #error { color: $error; }
     """
@@ -90,25 +99,3 @@ class PromptScreen(ModalScreen[str | None]):
 
     def action_cancel(self) -> None:
         self.dismiss(None)
-
-
-class LetterScreen(ModalScreen[str | None]):
-    """Wait for one letter (a mark's name); any other key cancels."""
-
-    DEFAULT_CSS = """
-    LetterScreen { align: center bottom; }
-    LetterScreen > Label { background: $accent; color: $text; padding: 0 2; margin-bottom: 3; }
-    """
-
-    def __init__(self, prompt: str, **kwargs: Any) -> None:
-        super().__init__(**kwargs)
-        self.prompt = prompt
-
-    def compose(self) -> ComposeResult:
-        yield Label(self.prompt)
-
-    def on_key(self, event: Key) -> None:
-        event.stop()
-        event.prevent_default()
-        letter = event.character or ""
-        self.dismiss(letter if len(letter) == 1 and letter.isalpha() else None)

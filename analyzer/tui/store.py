@@ -135,7 +135,7 @@ class RecordStore:
         self.protocols = Interner()
         self.kinds = Interner()
         self.flag_bits = FlagBits()
-        self.t0: float | None = None  # the first time seen
+        self.t0: float | None = None  # the earliest time seen
         self.t_last: float | None = None  # the latest time seen
         self._summaries: dict[str, str] = {}
         self._blocks: list[bytes] = []
@@ -157,8 +157,9 @@ class RecordStore:
         times = column(records, "t")
         known: list[float] = [t for t in times if t is not None]
         if known:
-            if self.t0 is None:
-                self.t0 = known[0]
+            low = min(known)
+            if self.t0 is None or low < self.t0:
+                self.t0 = low
             top = max(known)
             if self.t_last is None or top > self.t_last:
                 self.t_last = top
@@ -284,10 +285,10 @@ class RecordStore:
         if self._seq_sorted:
             i = bisect_left(self.seq, seq, 0, n)
             return i if i < n and self.seq[i] == seq else None
-        for i in range(n):
-            if self.seq[i] == seq:
-                return i
-        return None
+        try:
+            return self.seq.index(seq, 0, n)  # records of several buses: in time order
+        except ValueError:
+            return None
 
     def time(self, i: int) -> float | None:
         t = self.t[i]

@@ -15,7 +15,7 @@
 //! A child module of python.rs.
 
 use super::python_live::RecordBatch;
-use crate::flags::UNANSWERED;
+use crate::flags::{OUT_OF_RANGE, UNANSWERED};
 use crate::hash::FastMap;
 use crate::model::{
     Fields, Record, Str, Value, EG2_CAN, EG2_SERIAL, FOREIGN_CAN, FRAME, GARBAGE, MODBUS_RTU,
@@ -782,9 +782,12 @@ fn record_from_py(rec: &Bound<'_, PyAny>, buses: &mut Vec<Arc<str>>) -> PyResult
     r.seq = rec.getattr(intern!(py, "seq"))?.extract()?;
     r.pair = rec.getattr(intern!(py, "pair"))?.extract()?;
     r.latency_ms = rec.getattr(intern!(py, "latency_ms"))?.extract()?;
+    // the flags the tracker reads
     let flags: Vec<String> = rec.getattr(intern!(py, "flags"))?.extract()?;
-    if flags.iter().any(|f| f == UNANSWERED) {
-        r.flags.push(UNANSWERED);
+    for code in [UNANSWERED, OUT_OF_RANGE] {
+        if flags.iter().any(|f| f == code) {
+            r.flags.push(code);
+        }
     }
     Ok(r)
 }

@@ -6,13 +6,14 @@
 //!
 //! A state's values are a fixed array in `VALUE_KEYS` order (the Python dict always holds every
 //! key, in that order); a sample keeps a copy of them and the indexes of the fields its record
-//! set, in the order the Python `changed` dict got them. Only valid frames set values; a value
-//! outside its documented range, or a request's write to a read-only register, is not folded in
-//! (the record carries the flag). Counters move on every frame of a device.
+//! set, in the order the Python `changed` dict got them. Only valid frames set values; a frame
+//! with any value outside its documented range (flagged `out_of_range`) sets none at all, and a
+//! request's write to a read-only register is not folded in (the record carries the flag).
+//! Counters move on every frame of a device.
 
 use std::sync::{Arc, OnceLock};
 
-use crate::flags::UNANSWERED;
+use crate::flags::{OUT_OF_RANGE, UNANSWERED};
 use crate::hash::FastMap;
 use crate::json::{push_int, push_str, push_value};
 use crate::model::{Fields, Record, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE};
@@ -338,7 +339,9 @@ impl Tracker {
                 fold.set(LATENCY_MS, Slot::Float(ms));
             }
         }
-        if rec.protocol == EG2_SERIAL {
+        if rec.flags.contains(&OUT_OF_RANGE) {
+            // a frame with a value out of range sets no value at all
+        } else if rec.protocol == EG2_SERIAL {
             serial(rec, request, &mut fold);
         } else {
             registers(&rec.fields, request, &mut fold);
@@ -415,8 +418,9 @@ fn spec(name: &str) -> Option<&'static Spec> {
     Some(&specs[i])
 }
 
-/// `_registers`: register values into the state, unless out of range or a request writes a
-/// read-only register (both are flagged on the record, and the gripper ignores such a write).
+/// `_registers`: register values into the state: none if any is out of its range, and not a
+/// request's write of a read-only register (both are flagged on the record, and the gripper
+/// ignores such a write).
 fn registers(f: &Fields, request: bool, fold: &mut Fold<'_>) {
     let one;
     let values: &[(crate::model::Str, Value)] = match get(f, "values") {
@@ -433,23 +437,26 @@ fn registers(f: &Fields, request: bool, fold: &mut Fold<'_>) {
             &one
         }
     };
-    for (name, value) in values {
-        let Some(spec) = spec(name) else { continue };
-        if request && spec.read_only {
-            continue;
-        }
+    let out_of_range = |(name, value): &(crate::model::Str, Value)| {
+        let Some(spec) = spec(name) else {
+            return false;
+        };
         // isinstance(value, int): a bool is one too
         let as_int = match value {
             Value::Int(i) => Some(*i),
             Value::Bool(b) => Some(i64::from(*b)),
             _ => None,
         };
-        if let (Some(lo), Some(hi), Some(v)) = (spec.lo, spec.hi, as_int) {
-            if !(lo <= v && v <= hi) {
-                continue;
-            }
+        matches!((spec.lo, spec.hi, as_int), (Some(lo), Some(hi), Some(v)) if !(lo <= v && v <= hi))
+    };
+    if values.iter().any(out_of_range) {
+        return; // one value out of range: the frame sets none
+    }
+    for (name, value) in values {
+        let Some(spec) = spec(name) else { continue };
+        if !(request && spec.read_only) {
+            fold.set(spec.field, Slot::from_value(value));
         }
-        fold.set(spec.field, Slot::from_value(value));
     }
 }
 
@@ -674,7 +681,6 @@ mod tests {
             RESPONSE,
             values(&[
                 ("CMD_FORCE_ACT", Value::Int(99999)), // no documented range: folded
-                ("CMD_OPENLEN_ACT", Value::Int(1001)), // out of range: not folded
                 ("CMD_TEMP", Value::Int(40)),
                 ("REG_1008", Value::Int(1)), // not a state field
             ]),
@@ -688,6 +694,32 @@ mod tests {
         assert_eq!(s.values.slots[OPENING], Slot::Null);
         assert_eq!(s.values.frames, 1);
         assert_eq!((s.seq, s.protocol, s.t), (7, EG2_CAN, Some(1.5)));
+    }
+
+    #[test]
+    fn a_frame_with_a_value_out_of_range_sets_none() {
+        // the manual's misread reply: opening 59395 out of range, so force 243 is not trusted
+        let mut t = Tracker::new(true);
+        let misread = values(&[
+            ("CMD_FORCE_ACT", Value::Int(243)),
+            ("CMD_OPENLEN_ACT", Value::Int(59395)),
+        ]);
+        assert!(t.update(&rec(EG2_CAN, RESPONSE, misread.clone())).is_none());
+        // flagged by the decoder: nothing either, whatever the values
+        let mut flagged = rec(EG2_SERIAL, RESPONSE, vec![]);
+        flagged.code = Some(i64::from(cmd::READ_ACTPOS));
+        flagged.fields = vec![(Cow::Borrowed("position"), Value::Int(500))].into();
+        flagged.flags = vec![OUT_OF_RANGE];
+        assert!(t.update(&flagged).is_none());
+        let st = &t.states()[0];
+        assert_eq!(st.values.slots[FORCE], Slot::Null);
+        assert_eq!(st.values.slots[OPENING], Slot::Null);
+        assert_eq!(st.values.frames, 2);
+        // a request's command is still noted
+        let mut request = rec(EG2_CAN, REQUEST, misread);
+        request.flags = vec![OUT_OF_RANGE];
+        let s = t.update(&request).unwrap();
+        assert_eq!(s.changed.iter().collect::<Vec<_>>(), vec![LAST_COMMAND]);
     }
 
     #[test]

@@ -63,6 +63,7 @@ async def bench_capture(n: int) -> None:
         t0 = time.perf_counter()
         app = capture_app(path)
         async with app.run_test(size=(200, 50)) as pilot:
+            await pilot.pause()  # the screen is composed: the frame list exists
             while app.frames.row_count == 0:
                 await asyncio.sleep(0.01)
             first = time.perf_counter() - t0

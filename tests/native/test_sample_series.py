@@ -118,9 +118,12 @@ def test_live_can_traffic(seed: int) -> None:
     check(nat.update_many(live.finish()), py.update_many(decoding.finish()))
     assert groups > 500, groups
     everything = _native.Tracker().update_many(joined)
-    assert check(everything, Tracker().update_many(list(joined))) > 100
+    want = Tracker().update_many(list(joined))
+    assert check(everything, want) > 100
     series = everything.series(PLOTTED)
-    assert {bus for bus, *_ in series} == {"can0", "can1", "vcan2"}
+    # the buses where a frame set a plotted value (one with any value out of range sets none)
+    plotted = {s.bus for s in want if any(f in s.changed for f in PLOTTED)}
+    assert {bus for bus, *_ in series} == plotted and len(plotted) >= 2
     assert any(len(names) > 1 for _, _, names, *_ in series)
     assert any(None in times for _, _, _, times, *_ in series)
 

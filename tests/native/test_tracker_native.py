@@ -500,3 +500,57 @@ def test_threads_read_while_the_session_folds() -> None:
     for w, g in zip(want, made, strict=True):
         assert_same_samples(w, g)
     assert_same_states(py, nat)
+
+
+# -- a frame with a value out of range sets no value at all -----------------------------------
+
+
+def misread_frames() -> list[tuple[str, Item]]:
+    """The manual's CAN reply read big endian (opening 59395 beside force 243), a Modbus read
+    reply with the same two values, and a serial run state with position 3000 beside state 1,
+    each after a valid reading of the same gripper, as a session hands them to the tracker."""
+    can_ok = b.u16le(100, 500, 0, 30)
+    can_bad = bytes.fromhex("F3 00 03 E8 00 00 00 22")  # 4.1.1: force 243, opening 59395
+    modbus_ok, modbus_bad = [100, 500, 0, 30, 0, 1], [243, 59395, 0, 30, 0, 1]
+    run_ok = bytes((1, 0, 40)) + b.u16le(500, 100)
+    run_bad = bytes((2, 0, 40)) + b.u16le(3000, 100)
+    s = b.serial_frame
+    items: list[tuple[str, Item]] = []
+    for t, (can_data, regs, run) in enumerate(
+        ((can_ok, modbus_ok, run_ok), (can_bad, modbus_bad, run_bad))
+    ):
+        frames = (
+            b.can_read_request(1, 1120, 8, t=float(t)),
+            b.can_read_response(1, 1120, can_data, t=t + 0.001),
+        )
+        items += [(EG2_CAN, Item("can0", f)) for f in frames]
+        for k, raw in enumerate(
+            (b.modbus_read_request(1, 1060, 6), b.modbus_read_response(1, regs))
+        ):
+            items.append((MODBUS_RTU, Item("rs485", Chunk(raw, t + 0.002 + k / 1000))))
+        for k, raw in enumerate(
+            (s(1, Cmd.READ_EG_RUNSTATE), s(1, Cmd.READ_EG_RUNSTATE, run, True))
+        ):
+            items.append((EG2_SERIAL, Item("rs232", Chunk(raw, t + 0.004 + k / 1000))))
+    return items
+
+
+def test_a_frame_with_a_value_out_of_range_sets_none() -> None:
+    """Both trackers fold the valid readings and none of a misread frame's: not the force
+    beside the opening 59395, not the state beside the position 3000."""
+    items = misread_frames()
+    decoding = Decoding(per_bus={"rs485": MODBUS_RTU, "rs232": EG2_SERIAL})
+    records = [r for _, item in items for r in decoding.feed(item)] + decoding.finish()
+    bad = [r for r in records if "out_of_range" in r.flags]
+    assert {r.protocol for r in bad} == {EG2_CAN, MODBUS_RTU, EG2_SERIAL}
+    assert run_both([records[:3], records[3:]]) > 0
+    py = Tracker()
+    samples = py.update_many(records)
+    bad_keys = {(r.bus, r.seq) for r in bad}
+    noted = [set(x.changed) for x in samples if (x.bus, x.seq) in bad_keys]
+    assert noted and all(c <= {"latency_ms", "last_command"} for c in noted)  # no reading
+    for bus in ("can0", "rs485"):
+        st = py.states[(bus, 1)].values
+        assert (st["force"], st["opening"]) == (100, 500), bus
+    serial = py.states[("rs232", 1)].values
+    assert (serial["state"], serial["opening"]) == (1, 500)

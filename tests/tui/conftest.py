@@ -5,53 +5,81 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
+import sys
 from collections.abc import AsyncIterator, Callable
-from contextlib import asynccontextmanager
+from contextlib import ExitStack, asynccontextmanager
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
-from analyzer.commands.common import CaptureOptions, byte_protocol, open_reader
-from analyzer.commands.tui import live_plan
-from analyzer.session import Session, SessionOptions
-from analyzer.tui.app import Eg2ScopeApp, SessionPlan
-from analyzer.tui.replay import ReplaySource
+from analyzer.cli import build_parser
+from analyzer.commands.tui import capture_plan, extra_listeners, live_plan
+from analyzer.tui.app import Eg2ScopeApp
+from analyzer.tui.notes import Notes
 
-CAPTURES = Path(__file__).resolve().parents[2] / "captures"
+ROOT = Path(__file__).resolve().parents[2]
+CAPTURES = ROOT / "captures"
 SIZE = (200, 50)
+SIZES = {"80x24": (80, 24), "120x35": (120, 35), "200x50": (200, 50)}
+_readers = ExitStack()  # the captures' readers, closed when the tests end
+
+
+def tui_args(*argv: str) -> argparse.Namespace:
+    """``eg2scope tui ARGV`` as the command line parses it."""
+    return build_parser().parse_args(["tui", *argv])
 
 
 def live_args(output: str | None = None, freeze_on: str | None = None) -> argparse.Namespace:
-    return argparse.Namespace(
-        protocol="auto", output=output, duration=None, queue_size=200_000, freeze_on=freeze_on
-    )
+    argv = ["--demo"]
+    if output:
+        argv += ["-o", output]
+    if freeze_on:
+        argv += ["--freeze-on", freeze_on]
+    return tui_args(*argv)
 
 
-def demo_app(rig, output: str | None = None, freeze_on: str | None = None) -> Eg2ScopeApp:
-    return Eg2ScopeApp(
-        live_plan(live_args(output, freeze_on), rig.taps, rig.protocols, rig.run_hosts)
-    )
+def demo_app(
+    rig, output: str | None = None, freeze_on: str | None = None, argv: tuple[str, ...] = ()
+) -> Eg2ScopeApp:
+    """The app ``eg2scope tui --demo`` makes, on ``rig``'s simulated buses."""
+    args = live_args(output, freeze_on)
+    if argv:
+        args = tui_args(*(["--demo"] + (["-o", output] if output else []) + list(argv)))
+    notes = Notes()
+    extra = extra_listeners(args, live=True, notes=notes)
+    plan = live_plan(args, rig.taps, rig.protocols, rig.run_hosts, extra)
+    plan.notes = notes
+    return Eg2ScopeApp(plan)
 
 
-def capture_app(path: Path, speed: float | None = None) -> Eg2ScopeApp:
-    opts = CaptureOptions(str(path), speed=speed, progress=False)
-    reader = open_reader(opts)
-    source = ReplaySource(reader, speed)
+def capture_app(path: Path, *argv: str, speed: float | None = None) -> Eg2ScopeApp:
+    """The app ``eg2scope tui PATH ARGV`` makes (the command's own plan: its options are
+    converted as the command converts them)."""
+    if speed is not None:
+        argv = (*argv, "--speed", f"{speed:g}")
+    args = tui_args(str(path), *argv)
+    notes = Notes()
+    plan = capture_plan(args, _readers, extra_listeners(args, live=False, notes=notes))
+    plan.notes = notes
+    return Eg2ScopeApp(plan)
 
-    def build(feed) -> Session:
-        return Session(source, [feed], SessionOptions(protocol=byte_protocol(opts)))
 
-    return Eg2ScopeApp(SessionPlan(build, live=False, replay=source, title=path.name))
+@pytest.fixture(scope="session", autouse=True)
+def _close_readers() -> Any:
+    yield
+    _readers.close()
 
 
 @asynccontextmanager
-async def driving(app: Eg2ScopeApp) -> AsyncIterator[Any]:
+async def driving(app: Eg2ScopeApp, size: tuple[int, int] = SIZE) -> AsyncIterator[Any]:
     """``app.run_test`` that always stops the session, even when the test fails inside."""
     try:
-        async with app.run_test(size=SIZE) as pilot:
+        async with app.run_test(size=size) as pilot:
             yield pilot
     finally:
         if app.session is not None:
@@ -66,3 +94,37 @@ async def until(pilot, condition: Callable[[], bool], timeout: float = 15.0) -> 
             pytest.fail(f"timed out after {timeout} s waiting for {condition}")
         await pilot.pause(0.1)
         waited += 0.1
+
+
+def eg2scope(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "analyzer", *argv],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+@pytest.fixture(scope="session")
+def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Every kind of input, made the way a user makes it."""
+    folder = tmp_path_factory.mktemp("inputs")
+    found = {
+        "serial dump": CAPTURES / "serial_session.bin",
+        "modbus dump": CAPTURES / "modbus_session.bin",
+        "candump log": CAPTURES / "can_pick_place.log",
+    }
+    for suffix in (".asc", ".blf"):
+        out = folder / f"pick_place{suffix}"
+        with can.LogReader(found["candump log"]) as reader, can.Logger(out) as writer:
+            for msg in reader:
+                writer.on_message_received(msg)
+        found[suffix] = out
+    for name, buses in (("demo recording", "serial,modbus,can"), ("can recording", "can")):
+        out = folder / f"{name.split()[0]}.mcap"
+        done = eg2scope("record", "--demo", "--buses", buses, "-o", str(out), "--duration", "3")
+        assert done.returncode == 0, done.stderr
+        found[name] = out
+    return found

@@ -1,11 +1,14 @@
-"""SVG snapshots (pytest-textual-snapshot) of the main screen, the detail pane and the help
-screen, on a fixed capture replayed to its end: fixed data, and every age measured on the
-capture's own clock, so the pictures are stable. Update with ``--snapshot-update``."""
+"""SVG snapshots (pytest-textual-snapshot) of the main screen at 80x24, 120x35 and 200x50,
+the detail pane, the help screen and the command palette, on fixed captures replayed to their
+end: fixed data, and every age measured on the capture's own clock, so the pictures are
+stable. Update with ``--snapshot-update`` (and look at what changed)."""
 
 from __future__ import annotations
 
 import pytest
-from conftest import CAPTURES, SIZE, capture_app, until
+from conftest import CAPTURES, SIZE, SIZES, capture_app, until
+from textual.command import CommandPalette
+from textual.widgets import Input
 
 from analyzer.tui.widgets.detail import DetailTree
 from analyzer.tui.widgets.devices import DevicePanel
@@ -18,14 +21,33 @@ async def replayed(pilot) -> None:
     await until(pilot, lambda: app.done)
     # the detail pane follows the newest record a moment later (DETAIL_FOLLOW_S)
     await until(pilot, lambda: app.query_one(DetailTree).record is not None)
+    await until(pilot, lambda: app.frames.known == app.store.count)
+    app.frames.action_follow()  # the newest row in view, whenever the layout came
+    await pilot.pause()
     app.query_one(DevicePanel).changed_at.clear()  # highlights fade with wall time
     app.show_panels()
     await pilot.pause()
 
 
-def test_main_screen(snap_compare) -> None:
-    app = capture_app(CAPTURES / "can_pick_place.log")
-    assert snap_compare(app, terminal_size=SIZE, run_before=replayed)
+@pytest.mark.parametrize("size", list(SIZES))
+@pytest.mark.parametrize("capture", ["can_pick_place.log", "serial_session.bin"])
+def test_main_screen(snap_compare, capture: str, size: str) -> None:
+    """Time, bus, direction, ID, name and the decoded values at every size; the detail pane
+    shrinks (120) or goes (80); names and values cut to fit end in an ellipsis."""
+    app = capture_app(CAPTURES / capture)
+    assert snap_compare(app, terminal_size=SIZES[size], run_before=replayed)
+
+
+def test_narrow_terminal_shows_the_detail_on_d(snap_compare) -> None:
+    async def detail(pilot) -> None:
+        await replayed(pilot)
+        pilot.app.frames.move_to(7)
+        await pilot.pause(0.3)
+        await pilot.press("d")
+        await pilot.pause(0.2)
+
+    app = capture_app(CAPTURES / "modbus_session.bin")
+    assert snap_compare(app, terminal_size=SIZES["80x24"], run_before=detail)
 
 
 def test_detail_pane_and_hex_cross_highlighting(snap_compare) -> None:
@@ -41,10 +63,24 @@ def test_detail_pane_and_hex_cross_highlighting(snap_compare) -> None:
     assert snap_compare(app, terminal_size=SIZE, run_before=select)
 
 
-def test_help_screen(snap_compare) -> None:
+@pytest.mark.parametrize("size", ["80x24", "200x50"])
+def test_help_screen(snap_compare, size: str) -> None:
     async def help_(pilot) -> None:
         await replayed(pilot)
         await pilot.press("question_mark")
 
     app = capture_app(CAPTURES / "serial_session.bin")
-    assert snap_compare(app, terminal_size=SIZE, run_before=help_)
+    assert snap_compare(app, terminal_size=SIZES[size], run_before=help_)
+
+
+def test_command_palette(snap_compare) -> None:
+    async def palette(pilot) -> None:
+        await replayed(pilot)
+        await pilot.press("ctrl+p")
+        await until(pilot, lambda: isinstance(pilot.app.screen, CommandPalette))
+        pilot.app.screen.query_one(Input).cursor_blink = False  # a steady picture
+        await pilot.press(*"filter")
+        await pilot.pause(0.5)
+
+    app = capture_app(CAPTURES / "serial_session.bin")
+    assert snap_compare(app, terminal_size=SIZES["80x24"], run_before=palette)

@@ -1,15 +1,18 @@
-"""``eg2scope tui --demo`` as a user runs it: a process in a real pseudo-terminal (pexpect),
-the screen read back through a terminal emulator (pyte), keys sent, ``q`` to quit; the
-terminal is restored and the ``-o`` recording is complete."""
+"""``eg2scope tui`` as a user runs it: a process in a real pseudo-terminal (pexpect), the
+screen read back through a terminal emulator (pyte), keys sent as a person types them, ``q``
+to quit; the terminal is restored, the exit status is the contract's and the ``-o``
+recording (or ``--rerun`` file) is complete. Every kind of input at 80x24 and 200x50."""
 
 from __future__ import annotations
 
 import json
+import re
 import sys
 import time
 from pathlib import Path
 
 import pytest
+from conftest import ROOT
 
 from analyzer.recording import MARKS, McapCaptureReader, read_metadata
 
@@ -17,20 +20,21 @@ pexpect = pytest.importorskip("pexpect")
 pyte = pytest.importorskip("pyte")
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
 COLUMNS, LINES = 200, 50
+ROW = re.compile(r"^.\s*(?:\d+\s+)?(-|[\d.]+)\s+(\S+)\s+([→←·])\s+(ID \d+|-)\s+(\S+)")
 
 
 class Terminal:
-    def __init__(self, argv: list[str]) -> None:
-        self.screen = pyte.Screen(COLUMNS, LINES)
+    def __init__(self, argv: list[str], size: tuple[int, int] = (COLUMNS, LINES)) -> None:
+        columns, lines = size
+        self.screen = pyte.Screen(columns, lines)
         self.stream = pyte.ByteStream(self.screen)
         self.raw = bytearray()
         self.child = pexpect.spawn(
             argv[0],
             argv[1:],
             cwd=str(ROOT),
-            dimensions=(LINES, COLUMNS),
+            dimensions=(lines, columns),
             env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "TEXTUAL_ANIMATIONS": "none"},
         )
 
@@ -56,6 +60,35 @@ class Terminal:
                 return self.text()
             time.sleep(0.1)
         pytest.fail(f"{words!r} never appeared; the screen:\n{self.text()}")
+
+    def type(self, keys: str, gap: float = 0.05) -> None:
+        """Keys one at a time, ``gap`` seconds apart (a person typing at normal speed)."""
+        for key in keys:
+            self.child.send(key)
+            time.sleep(gap)
+            self.read()
+
+    def quit(self, timeout: float = 30.0) -> int:
+        """``q``, then the exit status once the process has gone."""
+        self.child.send("q")
+        end = time.monotonic() + timeout
+        while self.child.isalive() and time.monotonic() < end:
+            self.read()
+        self.read()
+        if self.child.isalive():
+            self.child.terminate(force=True)
+            pytest.fail(f"still running {timeout} s after q; the screen:\n{self.text()}")
+        self.child.close()
+        return self.child.exitstatus
+
+    def after(self) -> str:
+        """What was printed once the app had given the terminal back."""
+        raw = bytes(self.raw)
+        return raw[raw.rfind(b"\x1b[?1049l") :].decode(errors="replace")
+
+
+def tui(*argv: str) -> list[str]:
+    return [sys.executable, "-m", "analyzer", "tui", *argv]
 
 
 def test_tui_demo_in_a_real_terminal(tmp_path: Path) -> None:
@@ -101,3 +134,102 @@ def test_tui_demo_in_a_real_terminal(tmp_path: Path) -> None:
     with out.open("rb") as f:
         marks = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=[MARKS])]
     assert [m["name"] for m in marks] == ["a"]
+
+
+SIZES = {"80x24": (80, 24), "200x50": (200, 50)}
+KINDS = [
+    "serial dump", "modbus dump", "candump log", ".asc", ".blf", "demo recording", "can recording",
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("size", list(SIZES))
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_input_in_a_real_terminal(inputs: dict[str, Path], kind: str, size: str) -> None:
+    """The capture replays to its end; every row on screen has time, bus, direction, ID and a
+    whole name (or one that ends in an ellipsis), times never run backwards; q exits 0."""
+    term = Terminal(tui(str(inputs[kind])), SIZES[size])
+    try:
+        screen = term.wait_for("replay done")
+        rows = [m for line in screen.splitlines() if (m := ROW.match(line))]
+        assert len(rows) >= 5, screen
+        names = {m.group(5) for m in rows}
+        assert not any(re.fullmatch(r"CMD_\w*", n) and len(n) <= 5 for n in names), names
+        reached: dict[str, float] = {}  # a bus's own clock may step back: its order is kept
+        keys = []
+        for m in rows:
+            if m.group(1) != "-":
+                t = float(m.group(1))
+                keys.append(
+                    reached.setdefault(m.group(2), t) if t < reached.get(m.group(2), t) else t
+                )
+                reached[m.group(2)] = keys[-1]
+        assert keys == sorted(keys), screen
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+    assert "records decoded" in term.after()
+
+
+def test_marks_typed_at_normal_speed_and_the_palette_in_the_demo() -> None:
+    """m a and ' a typed 50 ms apart set and find the mark; Ctrl+P opens the palette and Esc
+    closes it without a crash; q exits 0."""
+    term = Terminal(tui("--demo"), SIZES["80x24"])
+    try:
+        term.wait_for("rs485")
+        term.type(" ")  # pause the view: the cursor stays on one frame
+        term.wait_for("paused")
+        term.type("ma")
+        term.wait_for("marks a")
+        term.type("G")  # follow the newest frame again, then jump back to the mark
+        term.wait_for("following")
+        term.type("'a")
+        term.wait_for("paused")
+        assert "mark this frame" not in term.text()  # the prompt is gone
+        term.child.send("\x10")  # Ctrl+P
+        term.wait_for("Search for commands")
+        term.type("\x1b")
+        time.sleep(0.5)
+        term.read()
+        assert "Search for commands" not in term.text()
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+
+
+def test_rerun_on_the_tui_writes_a_real_rrd(tmp_path: Path, inputs: dict[str, Path]) -> None:
+    """``--rerun FILE.rrd`` logs what ``record --rerun`` logs; where it went is said after the
+    app has gone."""
+    sys.path.insert(0, str(ROOT / "tests" / "rerun"))
+    from rrd_helpers import read_rrd  # tests/rerun's reader of .rrd files
+
+    for argv, name in (
+        ([str(inputs["demo recording"])], "capture.rrd"),
+        (["--demo"], "live.rrd"),
+    ):
+        out = tmp_path / name
+        term = Terminal(tui(*argv, "--rerun", str(out)), SIZES["80x24"])
+        try:
+            term.wait_for("replay done" if argv != ["--demo"] else "rs485")
+            time.sleep(1.0)
+            status = term.quit()
+        finally:
+            if term.child.isalive():
+                term.child.terminate(force=True)
+        assert status == 0, term.after()
+        assert f"Rerun recording written to {out}" in term.after()
+        rrd = read_rrd(out)
+        assert rrd.blueprints
+        buses = {path.split("/")[1] for path in rrd.entities}
+        assert {"can0", "rs232", "rs485"} <= buses, sorted(rrd.entities)
+
+
+def test_an_engine_that_cannot_apply_is_a_usage_error() -> None:
+    term = Terminal(tui(str(ROOT / "captures" / "serial_session.bin"), "--engine", "native"))
+    term.child.expect(pexpect.EOF, timeout=30)
+    term.child.close()
+    assert term.child.exitstatus == 2
+    assert b"--engine native" in term.child.before

@@ -126,17 +126,18 @@ class DetailTree(Tree[NodeData]):
 
 
 class HexPane(Widget, can_focus=True):
-    """The selected record's bytes, 16 a line; the selected field's bytes highlighted; a byte
-    cursor (left/right, or a click) selects the field that holds the byte."""
+    """The selected record's bytes, 16 a line (8 in a narrow pane); the selected field's bytes
+    highlighted; a byte cursor (left/right, or a click) selects the field that holds the
+    byte."""
 
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("left", "move(-1)", "byte left", show=False),
         Binding("right", "move(1)", "byte right", show=False),
-        Binding("up", "move(-16)", "byte up", show=False),
-        Binding("down", "move(16)", "byte down", show=False),
+        Binding("up", "line(-1)", "byte up", show=False),
+        Binding("down", "line(1)", "byte down", show=False),
     ]
     DEFAULT_CSS = "HexPane { height: auto; min-height: 3; background: $surface; padding: 0 1; }"
-    PER_LINE = 16
+    WIDE_LINE = 16  # bytes a line where "0000  " + 3 cells and 1 character a byte fit
     HIGHLIGHT = Style(color="black", bgcolor="yellow", bold=True)
     CURSOR = Style(reverse=True)
 
@@ -144,13 +145,19 @@ class HexPane(Widget, can_focus=True):
     span: reactive[Span | None] = reactive(None)
     cursor: reactive[int] = reactive(-1)
 
+    @property
+    def per_line(self) -> int:
+        width = self.content_region.width
+        return self.WIDE_LINE if width == 0 or width >= 7 + 4 * self.WIDE_LINE else 8
+
     def render(self) -> Text:
         if not self.raw:
             return Text("no bytes", style="dim")
         text = Text(no_wrap=True)
-        for line_start in range(0, len(self.raw), self.PER_LINE):
+        per_line = self.per_line
+        for line_start in range(0, len(self.raw), per_line):
             text.append(f"{line_start:04X}  ", style="dim")
-            chunk = self.raw[line_start : line_start + self.PER_LINE]
+            chunk = self.raw[line_start : line_start + per_line]
             for k, b in enumerate(chunk):
                 offset = line_start + k
                 style = None
@@ -160,7 +167,7 @@ class HexPane(Widget, can_focus=True):
                     style = self.CURSOR
                 text.append(f"{b:02X}", style)
                 text.append(" ")
-            text.append("   " * (self.PER_LINE - len(chunk)))
+            text.append("   " * (per_line - len(chunk)))
             text.append(" ")
             for k, b in enumerate(chunk):
                 ch = chr(b) if 32 <= b < 127 else "."
@@ -181,6 +188,9 @@ class HexPane(Widget, can_focus=True):
         start = 0 if self.cursor < 0 else self.cursor + step
         self.select_byte(min(max(start, 0), len(self.raw) - 1))
 
+    def action_line(self, step: int) -> None:
+        self.action_move(step * self.per_line)
+
     def select_byte(self, offset: int) -> None:
         self.cursor = offset
         self.post_message(ByteSelected(offset))
@@ -190,7 +200,8 @@ class HexPane(Widget, can_focus=True):
         if offset is None or not self.raw:
             return
         column = offset.x - 6  # after "0000  "
-        if 0 <= column < self.PER_LINE * 3:
-            byte = offset.y * self.PER_LINE + column // 3
+        per_line = self.per_line
+        if 0 <= column < per_line * 3:
+            byte = offset.y * per_line + column // 3
             if byte < len(self.raw):
                 self.select_byte(byte)

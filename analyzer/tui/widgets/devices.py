@@ -2,7 +2,13 @@
 change highlighting): opening as a bar in 0-1000 and mm, force, current, temperature, state and
 fault in words, the setpoints, the last command, counts, latency p50/p95 and the age since last
 heard. Silent for ``STALE_S``: stale; for ``LOST_S``: lost. A value that just changed is
-highlighted and fades over ``FADE_S``."""
+highlighted and fades over ``FADE_S``.
+
+On a narrow panel the columns a person watches stay (bus, ID, state, faults, latency, age,
+then opening, force, temperature ...) and the others are left out (``columns_for``); a state or
+fault too long for its column is abbreviated (``SHORT_STATES``, ``SHORT_FAULTS``), never cut. A
+gripper whose state or faults were never read (one never heard, a broadcast ID) shows ``-``,
+not "none", and its age is "never": requests sent to it are not hearing from it."""
 
 from __future__ import annotations
 
@@ -15,7 +21,10 @@ from textual.geometry import Size
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
+from decoders.registers import FAULT_BITS
+
 from ...model import derived
+from ...tracker import READINGS
 from ..aggregates import DeviceKey, LatencyStats
 from ..messages import DeviceRow
 
@@ -25,14 +34,48 @@ FADE_S: Final = 2.0
 BAR_WIDTH: Final = 10
 
 
-def opening_bar(opening: int | None, mm: float | None) -> Text:
+# the manual's state words (decoders.registers.STATE_TEXT) in at most STATE_WIDTH characters
+SHORT_STATES: Final = {
+    1: "open, idle",
+    2: "closed, idle",
+    3: "stopped, idle",
+    4: "closing",
+    5: "opening",
+    6: "force-stopped",
+}
+SHORT_FAULTS: Final = dict(
+    zip(FAULT_BITS, ("stall", "over-temp", "over-curr", "driver", "comms"), strict=True)
+)
+
+
+def opening_bar(opening: int | None, mm: float | None, bar: bool = True) -> Text:
     if opening is None:
         return Text("-", style="dim")
-    filled = round(max(0, min(1000, opening)) / 1000 * BAR_WIDTH)
-    text = Text("█" * filled, style="green")
-    text.append("░" * (BAR_WIDTH - filled), style="dim")
-    text.append(f" {opening:4} {mm if mm is not None else 0:5.1f}mm")
+    text = Text()
+    if bar:
+        filled = round(max(0, min(1000, opening)) / 1000 * BAR_WIDTH)
+        text.append("█" * filled, style="green")
+        text.append("░" * (BAR_WIDTH - filled) + " ", style="dim")
+    text.append(f"{opening:4} {mm if mm is not None else 0:4.1f}mm")
     return text
+
+
+def state_words(state: int | None, text: str | None, width: int) -> str:
+    """The state in words, abbreviated when the manual's words do not fit ``width``."""
+    if state is None or text is None:
+        return "-"
+    return text if len(text) <= width else SHORT_STATES.get(state, text)
+
+
+def fault_words(fault: int | None, texts: list[str], width: int) -> str:
+    """The faults in words (abbreviated to fit ``width``); "none" only for a fault register
+    read as 0, "-" when it was never read."""
+    if fault is None:
+        return "-"
+    if not texts:
+        return "none"
+    full = ", ".join(texts)
+    return full if len(full) <= width else ",".join(SHORT_FAULTS.get(t, t) for t in texts)
 
 
 def age_text(age: float | None) -> Text:
@@ -56,21 +99,43 @@ def changed_style(since: float | None) -> str:
     return "green"
 
 
-# (heading, width): fixed widths, so a redraw is one pass of string formatting (a rich Table
-# measures every cell of every row on each redraw, which starved the session's thread)
+STATE_WIDTH: Final = 14
+FAULT_WIDTH: Final = 14
+BAR_OPENING: Final = 23  # the opening with its bar; without: 1000  70.0mm
+# (heading, width, priority): fixed widths, so a redraw is one pass of string formatting (a
+# rich Table measures every cell of every row on each redraw, which starved the session's
+# thread); a narrow panel keeps the columns of the lowest priority numbers
 COLUMNS: Final = (
-    ("bus", 6), ("ID", 5), ("opening", 23), ("force", 5), ("current", 7), ("°C", 4),
-    ("state", 12), ("fault", 14), ("target", 15), ("speed", 5), ("f.limit", 7),
-    ("last command", 16), ("frames", 8), ("err", 5), ("unans", 5), ("p50/p95 ms", 11),
-    ("age", 10),
+    ("bus", 6, 0), ("ID", 5, 0), ("opening", 11, 6), ("force", 5, 7), ("current", 7, 9),
+    ("°C", 4, 8), ("state", STATE_WIDTH, 1), ("fault", FAULT_WIDTH, 2), ("target", 15, 11),
+    ("speed", 5, 12), ("f.limit", 7, 13), ("last command", 16, 10), ("frames", 8, 14),
+    ("err", 5, 15), ("unans", 5, 16), ("p50/p95 ms", 11, 3), ("age", 10, 4),
 )  # fmt: skip
-LINE_WIDTH: Final = sum(width + 1 for _, width in COLUMNS)
+ALL_WIDTH: Final = sum(w + 1 for _, w, _ in COLUMNS) + BAR_OPENING - 11
 
 
-def table_line(cells: list[Any], bold: bool = False) -> Text:
-    """Cells (text or ``Text``) side by side in ``COLUMNS``' widths, cut with an ellipsis."""
+def columns_for(width: int) -> tuple[list[int], bool]:
+    """The columns (indexes into ``COLUMNS``, in their order) that fit ``width`` cells, and
+    whether the opening has room for its bar."""
+    if width <= 0 or width >= ALL_WIDTH:
+        return list(range(len(COLUMNS))), True
+    kept: list[int] = []
+    used = 0
+    for k in sorted(range(len(COLUMNS)), key=lambda k: COLUMNS[k][2]):
+        need = COLUMNS[k][1] + 1
+        if used + need <= width or COLUMNS[k][2] == 0:
+            kept.append(k)
+            used += need
+    return sorted(kept), False
+
+
+def table_line(cells: list[Any], kept: list[int], bar: bool, bold: bool = False) -> Text:
+    """The ``kept`` cells (text or ``Text``) side by side in their columns' widths."""
     line = Text(no_wrap=True, style="bold" if bold else "")
-    for cell, (_, width) in zip(cells, COLUMNS, strict=True):
+    for k in kept:
+        name, width, _ = COLUMNS[k]
+        width = BAR_OPENING if bar and name == "opening" else width
+        cell = cells[k]
         part = cell if isinstance(cell, Text) else Text(str(cell))
         part.truncate(width, overflow="ellipsis", pad=True)
         line.append_text(part)
@@ -95,6 +160,8 @@ class DevicePanel(ScrollView):
         self._shown: list[DeviceRow] = []  # the rows as of the last redraw
         self._at: tuple[float | None, float] = (None, 0.0)  # (clock, monotonic) of that redraw
         self._strips: dict[int, Strip] = {}
+        self._width = -1  # the width the columns were chosen for
+        self._kept, self._bar = columns_for(0)
 
     def take(self, rows: list[DeviceRow], changed: set[tuple[str, int, str]]) -> None:
         now = time.monotonic()
@@ -108,8 +175,19 @@ class DevicePanel(ScrollView):
         self._shown = self.rows
         self._at = (self.clock(), time.monotonic())
         self._strips = {}
-        self.virtual_size = Size(LINE_WIDTH, len(self._shown) + 1)
+        self._fit_width(force=True)
         self.refresh()
+
+    def _fit_width(self, force: bool = False) -> None:
+        width = self.scrollable_content_region.width
+        if width == self._width and not force:
+            return
+        self._width = width
+        self._kept, self._bar = columns_for(width)
+        self._strips = {}
+        line = sum(COLUMNS[k][1] + 1 for k in self._kept)
+        line += BAR_OPENING - COLUMNS[2][1] if self._bar else 0
+        self.virtual_size = Size(line, len(self._shown) + 1)
 
     @property
     def lines(self) -> list[Text]:
@@ -120,15 +198,17 @@ class DevicePanel(ScrollView):
 
     def _line(self, position: int) -> Text:
         if position == 0:
-            return table_line([name for name, _ in COLUMNS], bold=True)
+            return table_line([name for name, _, _ in COLUMNS], self._kept, self._bar, bold=True)
         clock, mono = self._at
-        return table_line(self._cells(self._shown[position - 1], clock, mono))
+        cells = self._cells(self._shown[position - 1], clock, mono)
+        return table_line(cells, self._kept, self._bar)
 
     def notify_style_update(self) -> None:
         super().notify_style_update()
         self._strips = {}
 
     def render_line(self, y: int) -> Strip:
+        self._fit_width()
         scroll_x, scroll_y = self.scroll_offset
         width = self.size.width
         position = scroll_y + y
@@ -152,13 +232,16 @@ class DevicePanel(ScrollView):
                 style=changed_style(None if at is None else mono - at),
             )
 
-        bar = opening_bar(v.get("opening"), v.get("opening_mm"))
+        bar = opening_bar(v.get("opening"), v.get("opening_mm"), self._bar)
         at = self.changed_at.get((row.bus, row.device, "opening"))
         if at is not None and changed_style(mono - at):
-            bar.stylize(changed_style(mono - at), BAR_WIDTH)
-        fault = v.get("fault_text") or []
+            bar.stylize(changed_style(mono - at), BAR_WIDTH + 1 if self._bar else 0)
+        faults = v.get("fault_text") or []
         lat = self.latency.get((row.bus, row.device))
-        age = None if clock is None or row.t is None else max(0.0, clock - row.t)
+        # heard: it answered (a latency) or something of it was read; requests sent to it
+        # (one that never answers, a broadcast ID) are not hearing from it
+        heard = v.get("latency_ms") is not None or any(v.get(k) is not None for k in READINGS)
+        age = None if clock is None or row.t is None or not heard else max(0.0, clock - row.t)
         target = v.get("target_opening")
         return [
             row.bus,
@@ -167,8 +250,11 @@ class DevicePanel(ScrollView):
             cell("force"),
             cell("current"),
             cell("temperature_c"),
-            cell("state", v.get("state_text")),
-            Text(", ".join(fault) or "none", style="bold red" if fault else "dim"),
+            cell("state", state_words(v.get("state"), v.get("state_text"), STATE_WIDTH)),
+            Text(
+                fault_words(v.get("fault"), faults, FAULT_WIDTH),
+                style="bold red" if faults else "dim",
+            ),
             cell("target_opening", None if target is None else f"{target} {v.get('target_mm')}mm"),
             cell("speed"),
             cell("force_setting"),

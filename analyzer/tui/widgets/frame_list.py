@@ -2,7 +2,8 @@
 
 Only the visible lines are rendered, each into a cached ``Strip``; the list holds no per-row
 widgets or objects, only the store and, when a filter is on, an ``array`` of the shown
-records' store indices. A million rows scroll as fast as a hundred.
+records' store indices. A million rows scroll as fast as a hundred. Rows are laid out for the
+list's width (``layout.row_layout``): nothing to scroll sideways, and what is cut ends in ``…``.
 
 Follow: while following, the cursor sits on the newest shown record; moving the cursor or
 scrolling up stops following (the capture goes on), ``End``/``G`` resumes.
@@ -25,11 +26,10 @@ from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
 from ..filter import CompiledFilter
+from ..layout import RowLayout, row_layout
 from ..messages import RowSelected
 from ..rows import STYLE_MATCH, TimeMode, render_row
 from ..store import OK, RecordStore
-
-LINE_WIDTH = 160  # the virtual width: rows are cut to the pane, scrolled sideways beyond it
 
 
 class FrameList(ScrollView, can_focus=True):
@@ -45,7 +45,7 @@ class FrameList(ScrollView, can_focus=True):
     ]
     COMPONENT_CLASSES: ClassVar[set[str]] = {"frame-list--cursor"}
     DEFAULT_CSS = """
-    FrameList { background: $surface; }
+    FrameList { background: $surface; overflow-x: hidden; }
     FrameList > .frame-list--cursor { background: $accent 40%; }
     FrameList:focus > .frame-list--cursor { background: $accent 70%; }
     """
@@ -67,6 +67,7 @@ class FrameList(ScrollView, can_focus=True):
         self._cache: LRUCache[tuple[Any, ...], Strip] = LRUCache(2048)
         self._styles: tuple[Style, Style] | None = None  # (base, cursor): looked up per theme
         self._selected: int | None = None
+        self._layout: RowLayout = row_layout(0)
 
     # -- what is shown --------------------------------------------------------------------
 
@@ -132,7 +133,7 @@ class FrameList(ScrollView, can_focus=True):
         self.refresh()
 
     def _resize(self) -> None:
-        size = Size(LINE_WIDTH, self.row_count)
+        size = Size(self.scrollable_content_region.width, self.row_count)
         if size == self.virtual_size:
             return
         height = self.scrollable_content_region.height
@@ -208,7 +209,17 @@ class FrameList(ScrollView, can_focus=True):
     def action_follow(self) -> None:
         self.move_to(self.row_count - 1, follow=True)
 
+    def _fit_width(self) -> None:
+        """Lay rows out for the list's width (it changes with the terminal, the panes and the
+        vertical scroll bar)."""
+        width = self.scrollable_content_region.width
+        if width != self._layout.width:
+            self._layout = row_layout(width)
+            self._cache.clear()
+            self._resize()
+
     def on_resize(self, event: events.Resize) -> None:
+        self._fit_width()
         # a scroll asked for before the list had its size (a capture decoded before the first
         # layout) was clamped to the top: following, the newest row goes back into view
         if self.follow and self.row_count:
@@ -252,6 +263,7 @@ class FrameList(ScrollView, can_focus=True):
     # -- rendering ----------------------------------------------------------------------------
 
     def render_line(self, y: int) -> Strip:
+        self._fit_width()
         scroll_x, scroll_y = self.scroll_offset
         position = scroll_y + y
         width = self.size.width
@@ -279,6 +291,7 @@ class FrameList(ScrollView, can_focus=True):
             reference,
             is_reference=index == self.reference,
             mark=mark,
+            layout=self._layout,
         )
         if self.search is not None:
             text.highlight_regex(self.search, STYLE_MATCH)
@@ -288,5 +301,5 @@ class FrameList(ScrollView, can_focus=True):
             text.stylize(cursor)
         line = text.render(self.app.console)
         return Strip(list(line), text.cell_len).extend_cell_length(
-            LINE_WIDTH, cursor if is_cursor else None
+            self._layout.width, cursor if is_cursor else None
         )

@@ -1,4 +1,5 @@
-"""Latency per command type: a small histogram and p50/p95/max."""
+"""Latency per command type: a small histogram and p50/p95/max. The figures are of the last
+``LATENCY_KEEP`` answers of each command; the samples column says how many of how many."""
 
 from __future__ import annotations
 
@@ -27,11 +28,11 @@ class LatencyPanel(Static):
         if not stats:
             return
         table = Table(expand=True, box=None)
-        for name in ("command", "n", "p50 ms", "p95 ms", "max ms", "0 .. max"):
-            table.add_column(name, no_wrap=True)
+        for name in ("command", "answers", "p50 ms", "p95 ms", "max ms", "0 .. max"):
+            table.add_column(name, no_wrap=True, overflow="ellipsis")
         for name, s in sorted(stats.items()):
             table.add_row(
-                name, f"{s.count:,}", f"{s.p50:.2f}", f"{s.p95:.2f}", f"{s.max:.2f}",
+                name, s.samples_text(), f"{s.p50:.2f}", f"{s.p95:.2f}", f"{s.max:.2f}",
                 sparkline(s.histogram),
             )  # fmt: skip
         self.update(table)

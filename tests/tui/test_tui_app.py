@@ -1,0 +1,254 @@
+"""The app's own behaviour (issue 17), driven with Textual's Pilot: a session thread that
+raises is shown at once and makes ``eg2scope tui`` exit 1; an exception in the app stops the
+session and exits non-zero; the command palette opens; marks take the very next key; the
+status line and the panels say what they show."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+from pathlib import Path
+
+import pytest
+from conftest import CAPTURES, SIZES, capture_app, demo_app, driving, tui_args, until
+from rich.console import Console
+from textual.command import CommandList, CommandPalette
+from textual.widgets import Input, RichLog, Static
+
+from analyzer.commands.common import CaptureOptions, open_reader
+from analyzer.commands.tui import finish
+from analyzer.session import Session, SessionOptions
+from analyzer.sim.rig import DemoRig
+from analyzer.tui.aggregates import LATENCY_KEEP, Aggregates
+from analyzer.tui.app import Eg2ScopeApp, SessionPlan
+from analyzer.tui.notes import Notes
+from analyzer.tui.replay import ReplaySource
+from analyzer.tui.rows import MARKERS
+from analyzer.tui.screens import HelpScreen
+from analyzer.tui.widgets.devices import DevicePanel
+from decoders.model import REQUEST, RESPONSE, Record
+
+
+def failing_app(path: Path) -> Eg2ScopeApp:
+    """The TUI as it was before issue 17's fix: the command line's protocol name "auto"
+    handed to the session unconverted, so its decoding raises KeyError on the first bytes."""
+    reader = open_reader(CaptureOptions(str(path)))
+    source = ReplaySource(reader)
+
+    def build(feed) -> Session:
+        return Session(source, [feed], SessionOptions(protocol="auto"))
+
+    return Eg2ScopeApp(SessionPlan(build, live=False, replay=source, title=path.name))
+
+
+def status(app: Eg2ScopeApp) -> str:
+    return str(app.query_one("#status", Static).render())
+
+
+def test_a_failed_session_is_shown_at_once_printed_on_exit_and_exits_1(capsys) -> None:
+    path = CAPTURES / "serial_session.bin"
+
+    async def scenario() -> Eg2ScopeApp:
+        app = failing_app(path)
+        async with driving(app) as pilot:
+            await until(pilot, lambda: app.failure is not None)
+            await pilot.pause(0.3)
+            assert isinstance(app.failure, KeyError)
+            assert "SESSION FAILED" in status(app)
+            shown = [n.message for n in app._notifications]
+            assert any("the session failed: KeyError: 'auto'" in m for m in shown), shown
+            await pilot.press("5")  # the events tab (a log draws once it is shown)
+            await pilot.pause(0.3)
+            log = app.query_one("#event-log", RichLog)
+            assert any("KeyError" in line.text for line in log.lines)
+            await pilot.press("q")
+        return app
+
+    app = asyncio.run(scenario())
+    assert finish(tui_args(str(path)), app, Notes()) == 1
+    err = capsys.readouterr().err
+    assert "eg2scope: error: the session failed: KeyError: 'auto' (at " in err
+
+
+def test_the_protocol_names_of_the_command_line_reach_the_session_converted() -> None:
+    for argv in ((), ("--protocol", "auto"), ("--protocol", "serial"), ("-p", "rs232")):
+        app = capture_app(CAPTURES / "serial_session.bin", *argv)
+        assert app.session.options.protocol in (None, "eg2-serial")
+
+
+def test_an_exception_in_the_app_stops_the_session_and_exits_non_zero(capsys) -> None:
+    """An unhandled exception ends a Textual app with return code 1; the live session (the
+    demo's taps) must end with it, not keep the process alive."""
+
+    async def scenario() -> Eg2ScopeApp:
+        with DemoRig(noise=0.0) as rig:
+            app = demo_app(rig)
+            with pytest.raises(ZeroDivisionError):
+                async with driving(app) as pilot:
+                    await until(pilot, lambda: app.store.count > 20)
+                    app.call_later(lambda: 1 / 0)
+                    await pilot.pause(0.5)
+            for worker in app.workers:
+                await worker.wait()
+        return app
+
+    app = asyncio.run(scenario())
+    assert app.return_code == 1
+    assert app.session._closed  # every listener closed: the session ended
+    assert finish(tui_args("--demo"), app, Notes()) == 1
+    assert "the TUI failed" in capsys.readouterr().err
+
+
+def test_the_command_palette_opens_and_shows_the_keys_as_they_are() -> None:
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "serial_session.bin")
+        async with driving(app, SIZES["80x24"]) as pilot:
+            await until(pilot, lambda: app.done)
+            await pilot.press("ctrl+p")
+            await until(pilot, lambda: isinstance(app.screen, CommandPalette))
+            await pilot.pause(0.3)
+            await pilot.press(*"filter")
+            await pilot.pause(0.5)
+            hits = app.screen.query_one(CommandList)
+            text = [str(hits.get_option_at_index(i).prompt) for i in range(hits.option_count)]
+            assert any("Display filter" in t and "[/ f]" in t for t in text), text
+            await pilot.press("escape")
+            await until(pilot, lambda: not isinstance(app.screen, CommandPalette))
+            assert app.failure is None and app.is_running
+            await pilot.press("q")
+        assert app.return_code == 0
+
+    asyncio.run(scenario())
+
+
+def test_marks_take_the_very_next_key() -> None:
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "can_pick_place.log")
+        async with driving(app) as pilot:
+            await until(pilot, lambda: app.done)
+            frames = app.frames
+            frames.move_to(3)
+            await pilot.press("m", "a")  # no pause between them
+            assert frames.marks == {"a": frames.index_at(3)}
+            frames.move_to(10)
+            await pilot.press("m", "b", "apostrophe", "a")
+            assert frames.selected == frames.index_at(3)
+            assert "marks ab" in app.status_text()
+            await pilot.press("m", "escape")  # anything but a letter cancels
+            assert set(frames.marks) == {"a", "b"}
+            # in the filter box, m is a letter of the filter
+            await pilot.press("slash", "m")
+            assert app.query_one("#filter", Input).value == "m"
+            assert app.awaiting_letter is None
+            await pilot.press("escape")
+
+    asyncio.run(scenario())
+
+
+def test_the_status_says_what_is_shown_and_an_invalid_filter_is_not_applied() -> None:
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "can_pick_place.log")
+        async with driving(app) as pilot:
+            await until(pilot, lambda: app.done)
+            frames = app.frames
+            assert f"| {frames.known:,} records |" in app.status_text()
+            assert " shown" not in app.status_text()
+            box = app.query_one("#filter", Input)
+            error = app.query_one("#filter-error", Static)
+            app.action_filter()
+            await pilot.press(*"dev ==", "enter")
+            assert "not applied; everything is shown" in str(error.render())
+            assert frames.filter is None
+            box.value = "dev == 1"
+            await pilot.press("enter")
+            shown = frames.row_count
+            assert 0 < shown < frames.known
+            assert f"{shown:,} of {frames.known:,} shown (filter: dev == 1)" in app.status_text()
+            app.action_filter()
+            box.value = "dev == 1 and"
+            await pilot.press("enter")
+            await pilot.pause()
+            assert "not applied; still applied: dev == 1" in str(error.render())
+            assert frames.filter is not None and frames.filter.text == "dev == 1"
+            assert any("not applied" in n.message for n in app._notifications)
+
+    asyncio.run(scenario())
+
+
+def test_devices_never_read_show_a_dash_and_the_help_explains_the_gutter() -> None:
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "serial_session.bin")
+        async with driving(app) as pilot:
+            await until(pilot, lambda: app.done)
+            panel = app.query_one(DevicePanel)
+            panel.redraw()
+            rows = {line.plain.split()[1]: line.plain for line in panel.lines[1:]}
+            assert set(rows) == {"1", "2", "255"}  # 2 never answered; 255 is the broadcast
+            for device in ("2", "255"):
+                assert " none " not in rows[device], rows[device]
+            assert " none " in rows["1"]  # its run state was read: no fault
+            await pilot.press("q")
+        app = capture_app(CAPTURES / "can_pick_place.log")
+        async with driving(app) as pilot:
+            await until(pilot, lambda: app.done)
+            panel = app.query_one(DevicePanel)
+            panel.redraw()
+            rows = {line.plain.split()[1]: line.plain for line in panel.lines[1:]}
+            for device in ("3", "16383"):  # asked, never answering; the broadcast ID
+                assert rows[device].rstrip().endswith("never"), rows[device]
+                assert " none " not in rows[device]
+            assert not rows["1"].rstrip().endswith("never")
+            await pilot.press("question_mark")
+            await until(pilot, lambda: isinstance(app.screen, HelpScreen))
+            console = Console(record=True, width=100, file=io.StringIO())
+            for widget in app.screen.query(Static):
+                console.print(widget.content)
+            text = console.export_text()
+            for mark, _ in MARKERS:
+                assert mark in text
+
+    asyncio.run(scenario())
+
+
+def test_latency_figures_say_how_many_answers_they_are_of() -> None:
+    agg = Aggregates()
+    n = LATENCY_KEEP + 500
+    records = []
+    for k in range(n):
+        for direction, latency in ((REQUEST, None), (RESPONSE, 1.0 + k % 7)):
+            records.append(
+                Record(
+                    float(k),
+                    "can0",
+                    "eg2-can",
+                    "frame",
+                    1,
+                    b"\x00",
+                    direction=direction,
+                    device=1,
+                    name="CMD_FORCE_ACT..CMD_TEMP",
+                    latency_ms=latency,
+                )
+            )
+    agg.add(records, 0)
+    stats = agg.snapshot().latency_by_command["CMD_FORCE_ACT..CMD_TEMP"]
+    assert stats.count == LATENCY_KEEP and stats.total == n
+    assert stats.samples_text() == f"last {LATENCY_KEEP:,} of {n:,}"
+    assert agg.snapshot().latency_by_device[("can0", 1)].samples_text().startswith("last ")
+    # a response without a manual name is listed under its protocol, as the frame list does
+    unnamed = Record(0.0, "can0", "eg2-can", "frame", 1, b"\x00", direction=RESPONSE, device=1)
+    unnamed.latency_ms = 0.5
+    agg.add([unnamed], n * 2)
+    assert set(agg.snapshot().latency_by_command) == {"CMD_FORCE_ACT..CMD_TEMP", "eg2-can"}
+
+
+def test_notes_of_outputs_are_shown_and_kept_for_the_end() -> None:
+    notes = Notes()
+    shown: list[str] = []
+    notes.show = shown.append
+    notes.write("eg2scope: Rerun recording written to x.rrd; ")
+    notes.write("open it with: rerun x.rrd\nsecond")
+    assert shown == ["eg2scope: Rerun recording written to x.rrd; open it with: rerun x.rrd"]
+    out = io.StringIO()
+    notes.print(out)
+    assert out.getvalue().splitlines() == [shown[0], "second"]
