@@ -505,10 +505,12 @@ def test_the_listener_is_registered_by_name(tmp_path: Path) -> None:
 # -- live sessions -----------------------------------------------------------------------------
 
 
-def run_live(taps: list[Any], out: Path, feed: Any) -> tuple[Collector, Rrd, RerunListener]:
+def run_live(
+    taps: list[Any], out: Path, feed: Any, engine: str = "auto"
+) -> tuple[Collector, Rrd, RerunListener]:
     collector = Collector()
     listener = RerunListener(str(out), live=True)
-    session = live_session(taps, [collector, listener])
+    session = live_session(taps, [collector, listener], engine=engine)
     thread = threading.Thread(target=session.run, daemon=True)
     thread.start()
     time.sleep(0.3)  # the taps open
@@ -520,7 +522,10 @@ def run_live(taps: list[Any], out: Path, feed: Any) -> tuple[Collector, Rrd, Rer
     return collector, read_rrd(out), listener
 
 
-def test_live_on_the_virtual_can_bus(tmp_path: Path) -> None:
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
+    if engine == "native" and not native_session_available():
+        pytest.skip("the native core is not built")
     channel = f"eg2-rerun-{os.getpid()}-{time.monotonic_ns()}"
 
     def feed() -> None:
@@ -535,7 +540,8 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path) -> None:
                     sender.send(msg)
                 time.sleep(0.01)
 
-    collector, rrd, _ = run_live([CanTap("can0", "virtual", channel)], tmp_path / "l.rrd", feed)
+    taps = [CanTap("can0", "virtual", channel)]
+    collector, rrd, _ = run_live(taps, tmp_path / "l.rrd", feed, engine)
     opening = rrd["/can0/1/opening_mm/measured"]
     assert opening.values == pytest.approx([opening_mm(1000 - 10 * i) for i in range(60)])
     expected = expected_series(collector.samples)
