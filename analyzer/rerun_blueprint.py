@@ -106,12 +106,14 @@ def blueprint(layout: Layout) -> rrb.Blueprint:
         play_state="following" if layout.live else None,
     )
     panels = (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
-    bus_pages = [p for p in (_page(layout, [bus], bus) for bus in layout.buses) if p is not None]
-    if len(layout.grippers) > MAX_COLUMNS and len(bus_pages) > 1:
-        if ent.SESSION_ERRORS in layout.paths:
-            bus_pages.append(_session_log())
-        root: Any = rrb.Tabs(*bus_pages, name="buses")
-    else:
+    root: Any = None
+    if len(layout.grippers) > MAX_COLUMNS:
+        pages = [p for p in (_page(layout, [bus], bus) for bus in layout.buses) if p is not None]
+        if len(pages) > 1:
+            if ent.SESSION_ERRORS in layout.paths:
+                pages.append(_session_log())
+            root = rrb.Tabs(*pages, name="buses")
+    if root is None:
         root = _page(layout, list(layout.buses), "grippers", session=True)
     if root is None:  # nothing with rows yet: no view (and the viewer makes none of its own)
         return _SharedAxisBlueprint(layout, time_panel, *panels, auto_views=False)

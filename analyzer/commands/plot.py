@@ -42,7 +42,9 @@ def add_subparser(sub: Any) -> None:
             "reading is plotted (nothing is downsampled), on the timelines capture_time and "
             "frame (the record's seq, as the TUI and the recording number it). By default the "
             "Rerun viewer is spawned when a display can be opened; otherwise <capture>.rrd is "
-            "written in the current directory and the command that opens it is printed."
+            "written in the current directory and the command that opens it is printed. The "
+            "layout shows a plot only for what the capture carries, every plot of a capture "
+            "over its whole span on one linked time axis (see docs/rerun.md)."
         ),
         epilog=(
             "examples:\n"
@@ -77,7 +79,8 @@ def add_subparser(sub: Any) -> None:
     where.add_argument(
         "--serve-web",
         action="store_true",
-        help="serve Rerun's web viewer on 127.0.0.1 (this machine only) until Ctrl-C",
+        help="serve Rerun's web viewer on 127.0.0.1 (this machine only) until Ctrl-C or "
+        "SIGTERM; the printed address asks for the WebGL renderer, which needs no GPU",
     )
     capture = parser.add_argument_group("capture replay")
     capture.add_argument(

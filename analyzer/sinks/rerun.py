@@ -7,17 +7,20 @@ batch for the entities that share their rows, one chunk per entity; never one ``
 value): every ``flush_interval`` seconds (a live viewer is updated ten times a second), whenever
 ``max_rows`` records and samples are waiting, and at the end. Nothing is downsampled. Each row
 carries ``capture_time`` (the record's ``t``) and ``frame`` (its ``seq``); a capture without
-timestamps (a raw serial dump) has ``frame`` only. The default blueprint is sent again whenever a
-gripper or bus appears.
+timestamps (a raw serial dump) has ``frame`` only. The default blueprint (``rerun_blueprint``)
+shows the entities that have rows: a viewer that watches gets a new one whenever a gripper, a
+bus or a quantity appears; a capture's file, the one of what was seen when it was opened and
+that of the whole capture at the end.
 
 The hot path does as little per value as it can. A state sample is filed under its gripper and
 the fields it changed (its "shape": a CAN reply of force, opening, current and temperature is one
 shape, a reply of state and fault another): one C-level call cuts the plotted values out of it
 into the shape's row-major array, two appends add its time and seq; a shape's fields share their
-rows, so they go out as one record batch. Records are scanned with comprehensions, not a loop
-that looks at each one. Live, the session flushes at its ticks when a flush is due, and a timer
-thread flushes when a long batch keeps the session busy past that; the Arrow columns are built and
-sent outside the buffers' lock, so the session goes on decoding meanwhile.
+rows, so they go out as one record batch. Records are read as columns, and the ones the logs
+show are sorted with boolean arrays (``rerun_logs.py``), not a loop that looks at each one.
+Live, the session flushes at its ticks when a flush is due, and a timer thread flushes when a
+long batch keeps the session busy past that; the Arrow columns are built and sent outside the
+buffers' lock, so the session goes on decoding meanwhile.
 """
 
 from __future__ import annotations
@@ -652,8 +655,8 @@ class RerunListener(Listener):
         faults: list[tuple[np.ndarray, np.ndarray]] = []  # (t, seq) of fault readings
         force_plot = f"{ent.gripper_path(*g.key)}/{ent.FORCE}"
         for field, t, seq, values in rows:
-            if field in ("force", "force_setting") and len(values):
-                highest = float(np.nanmax(values)) if values.dtype.kind == "f" else 0.0
+            if field in ("force", "force_setting") and len(values):  # the plot's y range
+                highest = float(np.max(values))
                 self._highest[force_plot] = max(self._highest.get(force_plot, 0.0), highest)
             if field == "force":
                 forces.append((seq, values))
@@ -786,9 +789,3 @@ def _lane_values(values: Any) -> list[str]:
             return list(map(str, whole.tolist()))
         values = values.tolist()
     return list(map(str, values))
-
-
-def _problem_text(rec: Record) -> str:
-    who = f"ID {rec.device} " if rec.device is not None else ""
-    what = rec.summary or rec.name or rec.kind
-    return f"{who}{what}: {'; '.join([*rec.errors, *rec.warnings])}"

@@ -578,12 +578,11 @@ def test_live_on_a_serial_pty(tmp_path: Path) -> None:
     assert opening.values == pytest.approx([opening_mm(p) for p in range(1000, 400, -50)])
     assert all(t is not None for t in opening.capture_time)
     shown = views(rrd)
-    names = [
-        "rs232 ID 1: opening (mm)",
-        "rs232 frames, errors, unanswered per s",
-        "rs232 latency (ms)",
-    ]
-    assert [v.name for v in shown] == names
+    names = {v.name for v in shown}
+    # only the opening was read: no other plot of the gripper (a loaded machine may split a
+    # frame, so the error log may or may not be there)
+    assert {n for n in names if n.startswith("rs232 ID 1")} == {"rs232 ID 1: opening (mm)"}
+    assert {"rs232 frames, errors, unanswered per s", "rs232 latency (ms)"} <= names
     assert all(v.entities for v in shown)
     assert Counter(s.bus for s in collector.samples) == Counter({"rs232": 24})
 
