@@ -191,9 +191,14 @@ class RerunOutput:
         else:
             self.attach(blueprint)
 
+    @property
+    def is_file(self) -> bool:
+        return self.target.kind == SAVE
+
     def attach(self, blueprint: Any) -> None:
-        """Send the recording (what is buffered, then everything) to the target. OSError when
-        it cannot be reached."""
+        """Send the recording (what is buffered, then everything) to the target, with
+        ``blueprint`` as its default (None: one is sent later, with ``show``). OSError when it
+        cannot be reached."""
         self.attached = True
         kind, where, stream = self.target.kind, self.target.where, self.stream
         if kind == SAVE:

@@ -9,8 +9,7 @@ value): every ``flush_interval`` seconds (a live viewer is updated ten times a s
 carries ``capture_time`` (the record's ``t``) and ``frame`` (its ``seq``); a capture without
 timestamps (a raw serial dump) has ``frame`` only. The default blueprint (``rerun_blueprint``)
 shows the entities that have rows: a viewer that watches gets a new one whenever a gripper, a
-bus or a quantity appears; a capture's file, the one of what was seen when it was opened and
-that of the whole capture at the end.
+bus or a quantity appears; a capture's file gets that of the whole capture at the end.
 
 The hot path does as little per value as it can. A state sample is filed under its gripper and
 the fields it changed (its "shape": a CAN reply of force, opening, current and temperature is one
@@ -597,10 +596,12 @@ class RerunListener(Listener):
                 layout = self.layout
             mono = time.monotonic()
             # grippers appear in bursts when a session starts: a blueprint a second at most,
-            # and only for a viewer that watches (a capture read at full speed: the first,
-            # which attaches the output, and the last)
-            watched = self.flush_interval < CAPTURE_FLUSH_S or not self.output.attached
-            due = final or (watched and mono >= self._next_layout)
+            # and only for a viewer that watches; a capture read at full speed gets the one
+            # it attaches with (a file: none, the data goes there from now on) and the last
+            watched = self.flush_interval < CAPTURE_FLUSH_S
+            if not (final or watched or self.output.attached) and self.output.is_file:
+                self.output.attach(None)
+            due = final or not self.output.attached or (watched and mono >= self._next_layout)
             if layout != self._sent_layout and due:
                 self.output.show(blueprint(layout))
                 self._sent_layout = layout

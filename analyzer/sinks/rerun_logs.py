@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from itertools import compress, repeat
-from operator import contains, eq, itemgetter
+from operator import attrgetter, contains, eq, itemgetter
 from typing import Any, Final
 
 import numpy as np
@@ -23,7 +23,7 @@ from decoders.flags import DEVICE_FAULT, ESTIMATED_TIME, FOREIGN, UNANSWERED
 from decoders.modbus_pdu import READ_HOLDING
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
 
-from ..batches import column, problem_indexes
+from ..batches import RecordBatch, column, problem_indexes
 
 # requests that only read (polls), by (protocol, code): the readings are plotted, the polls
 # are not listed as commands
@@ -66,8 +66,7 @@ class ShownRecords:
         n = len(index)
         self.t = stamps[self.index]
         self.seq = seqs[self.index]
-        pick = itemgetter(*index) if n > 1 else lambda c: [c[i] for i in index]
-        picked = [list(pick(column(records, name))) if n else [] for name in _READ]
+        picked = _columns_of(records, index)
         self.device, self.kind, errors, warnings, flags, self.summary, self.name = picked
         self.errors, self.warnings = errors, warnings
         has_error = np.fromiter(map(bool, errors), bool, n)
@@ -75,7 +74,9 @@ class ShownRecords:
         quiet = _flags(flags, bool) & _flags(flags, QUIET_FLAGS.issuperset)  # nothing wrong
         known = np.fromiter((d is not None for d in self.device), bool, n)
         frame = np.fromiter(map(eq, self.kind, repeat(FRAME)), bool, n)
-        ask = np.isin(self.index, asks)
+        ask = np.zeros(len(directions), bool)
+        ask[asks] = True
+        ask = ask[self.index]
         timed = ~np.isnan(self.t)
         self.logged = has_error | (problem & ~quiet)
         self.levels = np.where(has_error, ERROR, WARN)
@@ -113,3 +114,17 @@ class ShownRecords:
 
 # the attributes read for the rows shown (in ShownRecords.__init__'s order)
 _READ: Final = ("device", "kind", "errors", "warnings", "flags", "summary", "name")
+# below this share of a native batch shown, making the records shown costs less than reading
+# whole columns (about 6.5 us a record against 1.2 us a record of the batch for all of _READ)
+_FEW: Final = 0.2
+
+
+def _columns_of(records: Sequence[Record], index: list[int]) -> list[list[Any]]:
+    """The attributes of _READ of the records at ``index``, a list per attribute."""
+    if not index:
+        return [[] for _ in _READ]
+    if isinstance(records, RecordBatch) and len(index) >= _FEW * len(records):
+        pick = itemgetter(*index) if len(index) > 1 else lambda c: [c[index[0]]]
+        return [list(pick(column(records, name))) for name in _READ]
+    shown = [records[i] for i in index]
+    return [list(map(attrgetter(name), shown)) for name in _READ]
