@@ -15,11 +15,10 @@ The hot path does as little per value as it can. A state sample is filed under i
 the fields it changed (its "shape": a CAN reply of force, opening, current and temperature is one
 shape, a reply of state and fault another): one C-level call cuts the plotted values out of it
 into the shape's row-major array, two appends add its time and seq; a shape's fields share their
-rows, so they go out as one record batch. Records are read as columns, and the ones the logs
-show are sorted with boolean arrays (``rerun_logs.py``), not a loop that looks at each one.
-Live, the session flushes at its ticks when a flush is due, and a timer thread flushes when a
-long batch keeps the session busy past that; the Arrow columns are built and sent outside the
-buffers' lock, so the session goes on decoding meanwhile.
+rows, so they go out as one record batch. Records are scanned with comprehensions, not a loop
+that looks at each one. Live, the session flushes at its ticks when a flush is due, and a timer
+thread flushes when a long batch keeps the session busy past that; the Arrow columns are built and
+sent outside the buffers' lock, so the session goes on decoding meanwhile.
 """
 
 from __future__ import annotations
@@ -28,23 +27,28 @@ import math
 import threading
 import time
 from array import array
+from bisect import bisect_left
 from collections.abc import Sequence
-from itertools import groupby
+from itertools import compress, groupby, repeat
+from operator import eq
 from typing import Any, Final
 
 import numpy as np
 import pyarrow as pa
 
-from decoders.model import Record
+from decoders.eg2_can import OP_READ
+from decoders.eg2_serial import Cmd
+from decoders.flags import DEVICE_FAULT, ESTIMATED_TIME, FOREIGN, UNANSWERED
+from decoders.modbus_pdu import READ_HOLDING
+from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
 
 from .. import rerun_entities as ent
-from ..batches import column, sample_series
+from ..batches import column, problem_indexes, sample_series
 from ..listener import Listener
 from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
 from ..rerun_blueprint import Layout, blueprint
 from ..rerun_target import RerunOutput, RerunTarget, parse_target
 from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
-from .rerun_logs import ShownRecords
 
 NAN: Final = float("nan")  # no timestamp
 # a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
@@ -58,19 +62,30 @@ SCALAR: Final = "scalar"
 LANE: Final = "lane"
 TEXT: Final = "text"
 
+# requests that only read (polls), by (protocol, code): the readings are plotted, the polls
+# are not listed as commands
+_POLLS: Final = frozenset(
+    {(EG2_SERIAL, c.value) for c in Cmd if c.name.startswith("READ_")}
+    | {(MODBUS_RTU, READ_HOLDING), (EG2_CAN, OP_READ)}
+)
+# flags that say nothing is wrong: not logged as problems
+_QUIET_FLAGS: Final = frozenset({FOREIGN, ESTIMATED_TIME})
 _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ERROR"}
 # the state fields plotted, in the order their entities are sent
 _PLOTTED: Final = (*(s.field for s in ent.SERIES), *ent.LANES)
 
 
-def _grouped(keys: list[Any]) -> list[tuple[Any, np.ndarray]]:
-    """(key, the positions that have it) per distinct key, in the order keys first appear."""
-    if keys and keys.count(keys[0]) == len(keys):
-        return [(keys[0], np.arange(len(keys)))]
-    at: dict[Any, list[int]] = {}
-    for k, key in enumerate(keys):
-        at.setdefault(key, []).append(k)
-    return [(key, np.array(positions)) for key, positions in at.items()]
+def _shown(records: Sequence[Record]) -> list[int]:
+    """The indexes of the records the logs show, in order: those with problems, and the
+    controller's commands (requests that are not polls)."""
+    shown = problem_indexes(records)
+    directions = column(records, "direction")
+    asks = list(compress(range(len(directions)), map(eq, directions, repeat(REQUEST))))
+    if asks:
+        protocols, codes = column(records, "protocol"), column(records, "code")
+        shown += [i for i in asks if (protocols[i], codes[i]) not in _POLLS]
+        shown = sorted(set(shown))
+    return shown
 
 
 def _runs(buses: list[str]) -> list[tuple[str, int, int]]:
@@ -119,15 +134,6 @@ class _Columns(_Entity):
         self.values.append(value)
         if self.kind == TEXT:
             self.levels.append(level)
-
-    def extend(self, t: np.ndarray, seq: np.ndarray, values: list[Any], levels: Any) -> None:
-        """Rows at once: times (NaN: none), seqs, values and (text) levels."""
-        self.t.frombytes(np.ascontiguousarray(t, dtype=np.float64).tobytes())
-        if self.seq is not None:
-            self.seq.frombytes(np.ascontiguousarray(seq, dtype=np.int64).tobytes())
-        self.values.extend(values)
-        if self.kind == TEXT:
-            self.levels.extend(levels.tolist() if isinstance(levels, np.ndarray) else levels)
 
     def take(self) -> tuple[np.ndarray, np.ndarray | None, Any, list[str]]:
         """The rows so far (t, seq, values, levels), copied; the columns start empty."""
@@ -432,7 +438,7 @@ class RerunListener(Listener):
             latencies = np.array(column(records, "latency_ms"), dtype=np.float64)
             seqs = np.array(column(records, "seq"), dtype=np.int64)
             self._extend_span(stamps, seqs)
-            shown = ShownRecords(records, stamps, seqs)
+            shown = _shown(records)
             for name, lo, hi in _runs(column(records, "bus")):
                 bus = self.buses.get(name) or self._bus(name)
                 part = times[lo:hi]
@@ -441,8 +447,12 @@ class RerunListener(Listener):
                 if part:
                     bus.times.fromlist(part)
                     bus.last_t = max(bus.last_t, max(part))
-                if len(shown):
-                    self._log(name, bus, shown, shown.between(lo, hi))
+                for i in shown[bisect_left(shown, lo) : bisect_left(shown, hi)]:
+                    rec = records[i]
+                    if rec.errors or rec.warnings:
+                        self._problem(bus, rec)
+                    else:
+                        self._command(rec, "INFO")
                 # a latency needs both times: never NaN
                 timed = ~(np.isnan(latencies[lo:hi]) | np.isnan(stamps[lo:hi]))
                 if timed.any():
@@ -463,33 +473,32 @@ class RerunListener(Listener):
             first_t, last_t = self._time_span
             self._time_span = (min(first_t, float(timed.min())), max(last_t, float(timed.max())))
 
-    def _log(self, name: str, bus: _Bus, shown: ShownRecords, run: slice) -> None:
-        """One bus's run of the rows the logs show: its error log and health counts, the
-        fault marks and command logs of its grippers."""
-        t, seq = shown.t[run], shown.seq[run]
-        logged = np.flatnonzero(shown.logged[run])
-        if len(logged):
-            rows = logged + run.start
-            bus.errors.extend(t[logged], seq[logged], shown.texts(rows), shown.levels[rows])
-        for counted, times in (
-            (shown.nonframe, bus.nonframes),
-            (shown.error, bus.problems),
-            (shown.unanswered, bus.unanswered),
-        ):
-            times.frombytes(t[counted[run]].tobytes())
-        devices = shown.device[run]
-        for k in np.flatnonzero(shown.marked[run]).tolist():
-            g = self._gripper_at(name, devices[k])
-            g.mark_t.append(float(t[k]))
-            g.mark_seq.append(int(seq[k]))
-        commands = np.flatnonzero(shown.command[run])
-        if len(commands):
-            rows = commands + run.start
-            texts, levels = shown.command_texts(rows), shown.command_levels[rows]
-            for device, at in _grouped([devices[k] for k in commands.tolist()]):
-                g = self._gripper_at(name, device)
-                pick = commands[at]
-                g.commands.extend(t[pick], seq[pick], [texts[k] for k in at.tolist()], levels[at])
+    def _problem(self, bus: _Bus, rec: Record) -> None:
+        """A record with errors or warnings: the error log, a fault mark, the health counts."""
+        t = rec.t
+        quiet = bool(rec.flags) and _QUIET_FLAGS.issuperset(rec.flags)  # nothing wrong
+        if rec.errors:
+            bus.errors.add(t, rec.seq, _problem_text(rec), "ERROR")
+        elif not quiet:
+            bus.errors.add(t, rec.seq, _problem_text(rec), "WARN")
+        if t is not None:
+            if rec.kind != FRAME:
+                bus.nonframes.append(t)
+            if rec.errors:
+                bus.problems.append(t)
+            if UNANSWERED in rec.flags:
+                bus.unanswered.append(t)
+        if rec.device is not None and (rec.errors or DEVICE_FAULT in rec.flags):
+            g = self._gripper_of(rec)
+            g.mark_t.append(t)
+            g.mark_seq.append(rec.seq)
+        elif rec.direction == REQUEST and (rec.protocol, rec.code) not in _POLLS:
+            self._command(rec, "INFO" if quiet else "WARN")
+
+    def _command(self, rec: Record, level: str) -> None:
+        """A command of the controller (not a poll), in words, in its gripper's log."""
+        if rec.device is not None and rec.kind == FRAME:
+            self._gripper_of(rec).commands.add(rec.t, rec.seq, rec.summary or rec.name, level)
 
     def on_event(self, event: SourceEvent) -> None:
         """Warnings and errors of a live source (a port lost, drops) in the bus's error log.
@@ -772,8 +781,9 @@ class RerunListener(Listener):
             self._bus(bus)
         return g
 
-    def _gripper_at(self, bus: str, device: int) -> _Gripper:
-        return self.grippers.get((bus, device)) or self._gripper(bus, device)
+    def _gripper_of(self, rec: Record) -> _Gripper:
+        assert rec.device is not None
+        return self.grippers.get((rec.bus, rec.device)) or self._gripper(rec.bus, rec.device)
 
     def _bus(self, name: str) -> _Bus:
         bus = self.buses[name] = _Bus(name)
@@ -790,3 +800,9 @@ def _lane_values(values: Any) -> list[str]:
             return list(map(str, whole.tolist()))
         values = values.tolist()
     return list(map(str, values))
+
+
+def _problem_text(rec: Record) -> str:
+    who = f"ID {rec.device} " if rec.device is not None else ""
+    what = rec.summary or rec.name or rec.kind
+    return f"{who}{what}: {'; '.join([*rec.errors, *rec.warnings])}"
