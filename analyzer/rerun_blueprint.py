@@ -1,33 +1,60 @@
-"""The default Rerun blueprint of a session: one column per gripper (force, opening, current,
-temperature, the state lanes; time axes linked), each bus's error log, commands and health
-below; above four grippers, one tab per bus. Live, the plots follow the last 10 s.
+"""The default Rerun blueprint of a session: a view only for what the session carries.
 
-``Layout`` is what the blueprint depends on (the buses and grippers seen so far); the listener
-sends a new blueprint whenever it changes.
+Per gripper, two pages: force (with its limit and the fault marks), opening (with its target)
+and the state lanes; then current and temperature. Per bus: the error log, the commands, the
+health rates and the latencies. Above four grippers, one tab per bus. A view exists only when
+an entity it shows has rows (``Layout.paths``), so no plot is empty: an RS232 dump has no
+measured force or current, a CAN demo polls no current, a gripper that never answered has no
+column.
+
+Every plot's time axis is linked to the viewer's shared one, and that one is set: a capture
+shows its whole span on every plot (first to last record on the timeline the layout uses, so
+a raw dump's plots all run over the same ``frame`` numbers); live, the last 10 s before the
+time cursor. Plots with several series keep the top of their y range free, so the legend in
+that corner covers no data; a plot of one series names it in its title and has no legend.
+
+``Layout`` is what the blueprint depends on; the listener sends a new blueprint whenever it
+changes (a gripper, a bus or a quantity appears, a force outgrows its plot's range).
 """
 
 from __future__ import annotations
 
+import math
+import uuid
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from typing import Any, Final
 
+import rerun as rr
 import rerun.blueprint as rrb
 
 from . import rerun_entities as ent
 
 MAX_COLUMNS: Final = 4  # above this many grippers, a tab per bus
 LIVE_WINDOW_S: Final = 10.0
+# The viewer keeps the time range that linked axes share on a view of this id, which no
+# container shows (re_viewer_context's GLOBAL_VIEW_ID in Rerun 0.41): setting it there is
+# how a blueprint sets the x range of every linked plot at once.
+SHARED_AXIS_VIEW: Final = uuid.UUID("5c0dca6a-e63f-9cf7-f657-2602590474cc")
+LEGEND_ROOM: Final = 0.7  # plots with a legend: the data fills at most this much of the height
+OPENING_MM: Final = (0.0, 70.0)  # the stroke: opening 0-1000 is 0-70 mm
+
+MOTION_PAGE: Final = "force, opening, state"
+ELECTRIC_PAGE: Final = "current, temperature"
 
 
 @dataclass(frozen=True)
 class Layout:
-    """What the blueprint shows: buses and grippers in the order first seen."""
+    """What the blueprint shows: buses and grippers in the order first seen, the entities
+    that have rows, and how the plots' axes are set."""
 
     live: bool = False
     buses: tuple[str, ...] = ()
     grippers: tuple[tuple[str, int], ...] = ()  # grippers with readings or settings
-    session_log: bool = False
+    paths: frozenset[str] = frozenset()  # entity paths with rows
     timeline: str = ent.CAPTURE_TIME
+    span: tuple[int, int] | None = None  # a capture's first and last on ``timeline``
+    ceilings: tuple[tuple[str, float], ...] = ()  # (plot origin, highest value seen, rounded)
 
     def with_bus(self, bus: str) -> Layout:
         return self if bus in self.buses else replace(self, buses=(*self.buses, bus))
@@ -38,81 +65,224 @@ class Layout:
             return self
         return replace(self.with_bus(bus), grippers=tuple(sorted((*self.grippers, key))))
 
-    def with_session_log(self) -> Layout:
-        return replace(self, session_log=True)
+    def with_paths(self, paths: Iterable[str]) -> Layout:
+        new = self.paths.union(paths)
+        return self if new == self.paths else replace(self, paths=new)
 
     def with_timeline(self, timeline: str) -> Layout:
         return self if timeline == self.timeline else replace(self, timeline=timeline)
+
+    def with_span(self, first: int, last: int) -> Layout:
+        span = (first, last)
+        return self if span == self.span else replace(self, span=span)
+
+    def with_ceiling(self, origin: str, highest: float) -> Layout:
+        """Room for values up to ``highest`` on the plot at ``origin`` (rounded up to 1, 2 or
+        5 times a power of ten, so a growing value changes the layout rarely)."""
+        ceiling = nice_ceiling(highest)
+        ceilings = dict(self.ceilings)
+        if ceilings.get(origin, 0.0) >= ceiling:
+            return self
+        ceilings[origin] = ceiling
+        return replace(self, ceilings=tuple(sorted(ceilings.items())))
+
+    def has(self, path: str) -> bool:
+        return path in self.paths
+
+
+def nice_ceiling(value: float) -> float:
+    """The smallest of 1, 2, 5 x 10^k at or above ``value`` (1 for anything up to 1)."""
+    if not value > 1:
+        return 1.0
+    power = 10.0 ** math.floor(math.log10(value))
+    return next(m * power for m in (1, 2, 5, 10) if m * power >= value)
 
 
 def blueprint(layout: Layout) -> rrb.Blueprint:
     """The blueprint of ``layout`` (sent as the default blueprint and on every change)."""
     time_panel = rrb.TimePanel(
-        timeline=layout.timeline, play_state="following" if layout.live else None
+        timeline=layout.timeline,
+        state="collapsed",
+        play_state="following" if layout.live else None,
     )
-    if not layout.buses:
-        return rrb.Blueprint(rrb.TextLogView(origin="/", name="log"), time_panel)
+    panels = (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
+    root: Any = None
     if len(layout.grippers) > MAX_COLUMNS:
-        root: Any = rrb.Tabs(*[_bus_tab(layout, bus) for bus in layout.buses], name="buses")
-    else:
-        root = _page(layout, list(layout.buses), name="grippers")
-    return rrb.Blueprint(root, time_panel, collapse_panels=False)
+        pages = [p for p in (_page(layout, [bus], bus) for bus in layout.buses) if p is not None]
+        if len(pages) > 1:
+            if ent.SESSION_ERRORS in layout.paths:
+                pages.append(_session_log())
+            root = rrb.Tabs(*pages, name="buses")
+    if root is None:
+        root = _page(layout, list(layout.buses), "grippers", session=True)
+    if root is None:  # nothing with rows yet: no view (and the viewer makes none of its own)
+        return _SharedAxisBlueprint(layout, time_panel, *panels, auto_views=False)
+    return _SharedAxisBlueprint(layout, root, time_panel, *panels, auto_views=False)
 
 
-def _page(layout: Layout, buses: list[str], name: str) -> rrb.Vertical:
+class _SharedAxisBlueprint(rrb.Blueprint):
+    """A blueprint that also sets the shared time axis of the linked plots (see
+    ``SHARED_AXIS_VIEW``): the span of a capture, the last 10 s live."""
+
+    def __init__(self, layout: Layout, *parts: Any, auto_views: bool) -> None:
+        super().__init__(*parts, auto_views=auto_views, auto_layout=False)
+        self.shared_range = _shared_range(layout)
+
+    def _log_to_stream(self, stream: rr.RecordingStream) -> None:
+        super()._log_to_stream(stream)
+        if self.shared_range is not None:
+            axis = rrb.TimeAxis(view_range=self.shared_range)
+            stream.log(f"view/{SHARED_AXIS_VIEW}/TimeAxis", axis)
+
+
+def _shared_range(layout: Layout) -> rr.TimeRange | None:
+    boundary = rrb.TimeRangeBoundary
+    if layout.live:
+        return rr.TimeRange(
+            start=boundary.cursor_relative(seconds=-LIVE_WINDOW_S), end=boundary.cursor_relative()
+        )
+    if layout.span is None:
+        return None
+    first, last = layout.span
+    if layout.timeline == ent.FRAME:
+        return rr.TimeRange(start=boundary.absolute(seq=first), end=boundary.absolute(seq=last))
+    return rr.TimeRange(start=boundary.absolute(nanos=first), end=boundary.absolute(nanos=last))
+
+
+# -- pages ---------------------------------------------------------------------------------------
+
+
+def _page(layout: Layout, buses: list[str], name: str, session: bool = False) -> Any | None:
+    """The grippers of ``buses`` above their logs (and the session's, if asked); None when
+    there is nothing to show."""
     grippers = [key for key in layout.grippers if key[0] in buses]
-    bottom: list[Any] = [_bus_logs(layout, bus) for bus in buses]
-    if layout.session_log:
-        bottom.append(rrb.TextLogView(origin=f"/{ent.SESSION}/{ent.ERRORS}", name="session"))
-    if not grippers:
-        return rrb.Vertical(*bottom, name=name)
-    columns = rrb.Horizontal(*[_gripper_column(layout, *key) for key in grippers])
-    return rrb.Vertical(columns, rrb.Horizontal(*bottom), row_shares=[3, 1], name=name)
+    tops = [
+        (page, [c for c in (make(layout, *key) for key in grippers) if c is not None])
+        for page, make in ((MOTION_PAGE, _motion_column), (ELECTRIC_PAGE, _electric_column))
+    ]
+    pages = [rrb.Horizontal(*columns, name=page) for page, columns in tops if columns]
+    logs: list[Any] = [t for t in (_bus_logs(layout, bus) for bus in buses) if t is not None]
+    if session and ent.SESSION_ERRORS in layout.paths:
+        logs.append(_session_log())
+    parts: list[Any] = []
+    if pages:
+        parts.append(pages[0] if len(pages) == 1 else rrb.Tabs(*pages))
+    if logs:
+        parts.append(rrb.Horizontal(*logs))
+    if not parts:
+        return None
+    shares = [3.0, 1.0] if len(parts) == 2 else None
+    return rrb.Vertical(*parts, row_shares=shares, name=name)
 
 
-def _bus_tab(layout: Layout, bus: str) -> rrb.Vertical:
-    return _page(layout, [bus], name=bus)
+def _session_log() -> rrb.TextLogView:
+    return rrb.TextLogView(origin=ent.SESSION_ERRORS, name="session")
 
 
-def _gripper_column(layout: Layout, bus: str, device: int) -> rrb.Vertical:
+def _motion_column(layout: Layout, bus: str, device: int) -> rrb.Vertical | None:
     base = ent.gripper_path(bus, device)
     title = f"{bus} ID {device}"
-    plots = [
-        _plot(layout, f"{base}/force", f"{title}: force"),
-        _plot(layout, f"{base}/opening_mm", f"{title}: opening (mm)"),
-        _plot(layout, f"{base}/current", f"{title}: current"),
-        _plot(layout, f"{base}/temperature_c", f"{title}: temperature (°C)"),
+    views: list[Any] = []
+    shares: list[float] = []
+    force = _present(layout, base, ent.FORCE_ENTITIES)
+    if set(force) - {f"{base}/{ent.FAULT_MARKS}"}:  # marks alone make no force plot
+        views.append(_plot(layout, force, f"{base}/{ent.FORCE}", f"{title}: force", legend=True))
+        shares.append(2.0)
+    opening = _present(layout, base, ent.OPENING_ENTITIES)
+    if opening:
+        origin = f"{base}/{ent.OPENING}"
+        views.append(_plot(layout, opening, origin, f"{title}: opening (mm)", legend=True))
+        shares.append(2.0)
+    lanes = _present(layout, base, tuple(ent.LANES.values()))
+    if lanes:
+        views.append(
+            rrb.StateTimelineView(
+                origin=base,
+                contents=lanes,
+                name=f"{title}: state",
+                time_view=_time_axis(),
+                time_ranges=_window(layout),
+            )
+        )
+        shares.append(1.0 if views[:-1] else 2.0)
+    if not views:
+        return None
+    return rrb.Vertical(*views, row_shares=shares, name=title)
+
+
+def _electric_column(layout: Layout, bus: str, device: int) -> rrb.Vertical | None:
+    base = ent.gripper_path(bus, device)
+    title = f"{bus} ID {device}"
+    views = [
+        _plot(layout, [f"{base}/{entity}"], f"{base}/{entity}", f"{title}: {label}")
+        for entity, label in ((ent.CURRENT, "current"), (ent.TEMPERATURE, "temperature (°C)"))
+        if layout.has(f"{base}/{entity}")
     ]
-    lanes = rrb.StateTimelineView(
-        origin=base,
-        contents=[f"{base}/{ent.STATE}", f"{base}/{ent.FAULT}"],
-        name=f"{title}: state",
-        time_view=_time_axis(),
-        time_ranges=_window(layout),
+    return rrb.Vertical(*views, name=title) if views else None
+
+
+def _bus_logs(layout: Layout, bus: str) -> rrb.Tabs | None:
+    base = ent.bus_path(bus)
+    views: list[Any] = []
+    errors = f"{base}/{ent.ERRORS}"
+    if layout.has(errors):
+        views.append(rrb.TextLogView(origin=errors, name=f"{bus} errors"))
+    commands = sorted(
+        p for p in layout.paths if p.startswith(f"{base}/") and p.endswith(f"/{ent.COMMANDS}")
     )
-    return rrb.Vertical(*plots, lanes, name=title)
+    if commands:
+        views.append(rrb.TextLogView(origin=base, contents=commands, name=f"{bus} commands"))
+    health = f"{base}/{ent.HEALTH}"
+    rates = [f"{health}/{name}" for name in ent.RATES if layout.has(f"{health}/{name}")]
+    if rates:
+        views.append(_plot(layout, rates, health, f"{bus} frames, errors, unanswered per s", True))
+    latency = f"{health}/{ent.LATENCY}"
+    if layout.has(latency):
+        views.append(_plot(layout, [latency], latency, f"{bus} latency (ms)"))
+    return rrb.Tabs(*views, name=bus) if views else None
 
 
-def _plot(layout: Layout, origin: str, name: str) -> rrb.TimeSeriesView:
+def _present(layout: Layout, base: str, entities: Iterable[str]) -> list[str]:
+    return [f"{base}/{e}" for e in entities if layout.has(f"{base}/{e}")]
+
+
+def _plot(
+    layout: Layout, contents: list[str], origin: str, name: str, legend: bool = False
+) -> rrb.TimeSeriesView:
+    """A time series of ``contents``: several series keep a legend (at the top left, above
+    the data: their y range leaves room for it), one series is named by the title alone."""
+    if not legend or len(contents) == 1:
+        return rrb.TimeSeriesView(
+            origin=origin,
+            contents=contents,
+            name=name,
+            axis_x=_time_axis(),
+            time_ranges=_window(layout),
+            plot_legend=rrb.PlotLegend(visible=False),
+        )
     return rrb.TimeSeriesView(
         origin=origin,
+        contents=contents,
         name=name,
         axis_x=_time_axis(),
+        axis_y=_room_for_legend(layout, origin),
         time_ranges=_window(layout),
-        plot_legend=rrb.Corner2D.LeftTop,
+        plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.LeftTop, visible=True),
     )
 
 
-def _bus_logs(layout: Layout, bus: str) -> rrb.Tabs:
-    base = ent.bus_path(bus)
-    # the bus's text logs are its errors and its grippers' commands: all but the errors
-    commands = ["+ $origin/**", f"- $origin/{ent.ERRORS}"]
-    return rrb.Tabs(
-        rrb.TextLogView(origin=f"{base}/{ent.ERRORS}", name=f"{bus} errors"),
-        rrb.TextLogView(origin=base, contents=commands, name=f"{bus} commands"),
-        _plot(layout, f"{base}/{ent.HEALTH}", f"{bus} health"),
-        name=bus,
-    )
+def _room_for_legend(layout: Layout, origin: str) -> rrb.ScalarAxis | None:
+    """A y range whose top ``1 - LEGEND_ROOM`` holds no data: the opening's stroke, or the
+    highest value seen rounded up (None before any: Rerun's own range)."""
+    if origin.endswith(f"/{ent.OPENING}"):
+        low, high = OPENING_MM
+    else:
+        high = dict(layout.ceilings).get(origin, 0.0)
+        if not high:
+            return None
+        low = 0.0
+    low -= (high - low) * 0.03  # the zero line stays clear of the axis
+    return rrb.ScalarAxis(range=(low, low + (high - low) / LEGEND_ROOM))
 
 
 def _time_axis() -> rrb.TimeAxis:
@@ -120,7 +290,7 @@ def _time_axis() -> rrb.TimeAxis:
 
 
 def _window(layout: Layout) -> rrb.VisibleTimeRange | None:
-    """Live: the last 10 s before the time cursor (which follows the newest data)."""
+    """Live: the data of the last 10 s before the time cursor (which follows the newest)."""
     if not layout.live:
         return None
     return rrb.VisibleTimeRange(

@@ -10,6 +10,7 @@ the blueprint (``analyzer/rerun_blueprint.py``) lays them out; both read them fr
 /<bus>/<device>/commands                                       text log
 /<bus>/errors                                                  text log, levels from the flags
 /<bus>/health/frames_per_s  errors_per_s  unanswered_per_s  latency_ms
+/session/errors                                                text log: events of no bus
 ```
 """
 
@@ -30,10 +31,17 @@ FRAME: Final = "frame"  # the record's seq: the same number the TUI and the MCAP
 COMMANDS: Final = "commands"
 ERRORS: Final = "errors"
 HEALTH: Final = "health"
-FAULT_MARKS: Final = "force/faults"
+FORCE: Final = "force"  # the force plot's entities: measured, limit and the fault marks
+OPENING: Final = "opening_mm"  # the opening plot's: measured and target
+CURRENT: Final = "current"
+TEMPERATURE: Final = "temperature_c"
+FAULT_MARKS: Final = f"{FORCE}/faults"
 STATE: Final = "state"
 FAULT: Final = "fault"
 SESSION: Final = "session"  # where events that belong to no bus go (drops, a failed output)
+SESSION_ERRORS: Final = f"/{SESSION}/{ERRORS}"
+RATES: Final = ("frames_per_s", "errors_per_s", "unanswered_per_s")  # under /<bus>/health/
+LATENCY: Final = "latency_ms"  # under /<bus>/health/
 
 FAULT_MARK_COLOR: Final = 0xE3000BFF
 
@@ -71,16 +79,22 @@ class Series:
 
 
 SERIES: Final = (
-    Series("opening", "opening_mm/measured", "opening (mm)", 0x1F77B4FF, opening_mm_column),
+    Series("opening", f"{OPENING}/measured", "opening (mm)", 0x1F77B4FF, opening_mm_column),
     Series(
-        "target_opening", "opening_mm/target", "target (mm)", 0x9EC9E8FF, opening_mm_column, True
+        "target_opening", f"{OPENING}/target", "target (mm)", 0x9EC9E8FF, opening_mm_column, True
     ),
-    Series("force", "force/measured", "force", 0xFF7F0EFF),
-    Series("force_setting", "force/limit", "force limit", 0x8C8C8CFF, step=True),
-    Series("current", "current", "current", 0x2CA02CFF),
-    Series("temperature_c", "temperature_c", "temperature (°C)", 0x9467BDFF),
+    Series("force", f"{FORCE}/measured", "force", 0xFF7F0EFF),
+    Series("force_setting", f"{FORCE}/limit", "force limit", 0x8C8C8CFF, step=True),
+    Series("current", CURRENT, "current", 0x2CA02CFF),
+    Series("temperature_c", TEMPERATURE, "temperature (°C)", 0x9467BDFF),
 )
 SERIES_BY_FIELD: Final = {s.field: s for s in SERIES}
+# what each plot of a gripper shows, in legend order
+FORCE_ENTITIES: Final = (
+    *(s.entity for s in SERIES if s.entity.startswith(f"{FORCE}/")),
+    FAULT_MARKS,
+)
+OPENING_ENTITIES: Final = tuple(s.entity for s in SERIES if s.entity.startswith(f"{OPENING}/"))
 
 # the state lanes: field -> entity
 LANES: Final = {"state": STATE, "fault": FAULT}
@@ -90,7 +104,7 @@ HEALTH_SERIES: Final = {
     "frames_per_s": ("frames/s", 0x1F77B4FF),
     "errors_per_s": ("errors/s", 0xE3000BFF),
     "unanswered_per_s": ("unanswered/s", 0xFF7F0EFF),
-    "latency_ms": ("latency (ms)", 0x2CA02CFF),
+    LATENCY: ("latency (ms)", 0x2CA02CFF),
 }
 
 # the manual's run states (1-6), coloured by what they mean for a grip

@@ -5,7 +5,10 @@ commands.
 Default (no target named): spawn the viewer that ships with rerun-sdk when a display can be
 opened, otherwise write ``<name>.rrd`` in the current directory and say how to open it. The web
 viewer is served by Rerun's own command-line server, bound to 127.0.0.1 only (the SDK's
-``serve_web_viewer`` listens on every interface).
+``serve_web_viewer`` listens on every interface), and ends with eg2scope however eg2scope ends
+(Ctrl-C, SIGTERM, or killed outright: on Linux the kernel ends it). Its address asks for the
+WebGL renderer: Rerun's default, WebGPU, fails on machines without a GPU (its buffers are too
+large for a software renderer), and WebGL works everywhere.
 
 rerun is imported only when an output is opened, so the command line starts fast.
 """
@@ -15,9 +18,11 @@ from __future__ import annotations
 import argparse
 import atexit
 import os
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import webbrowser
 from dataclasses import dataclass
@@ -40,6 +45,8 @@ DEFAULT: Final = "default"  # --rerun given without a target
 DEFAULT_URL: Final = "rerun+http://127.0.0.1:9876/proxy"
 LOCALHOST: Final = "127.0.0.1"
 WEB_PORT: Final = 9090  # Rerun's own default, when it is free
+# the web viewer's renderer: WebGPU (Rerun's default) fails without a GPU, WebGL works anywhere
+WEB_RENDERER: Final = "webgl"
 URL_SCHEMES: Final = ("rerun://", "rerun+http://", "rerun+https://")
 
 
@@ -184,9 +191,14 @@ class RerunOutput:
         else:
             self.attach(blueprint)
 
+    @property
+    def is_file(self) -> bool:
+        return self.target.kind == SAVE
+
     def attach(self, blueprint: Any) -> None:
-        """Send the recording (what is buffered, then everything) to the target. OSError when
-        it cannot be reached."""
+        """Send the recording (what is buffered, then everything) to the target, with
+        ``blueprint`` as its default (None: one is sent later, with ``show``). OSError when it
+        cannot be reached."""
         self.attached = True
         kind, where, stream = self.target.kind, self.target.where, self.stream
         if kind == SAVE:
@@ -200,7 +212,11 @@ class RerunOutput:
             self.server, grpc_url, self.web_url = _serve_web()
             atexit.register(self.stop_server)  # whoever ran the session, the server ends with it
             stream.connect_grpc(grpc_url, default_blueprint=blueprint)
-            print(f"eg2scope: Rerun web viewer at {self.web_url}", file=self.out)
+            print(
+                f"eg2scope: serving the Rerun web viewer at {self.web_url} (the WebGL renderer: "
+                "it needs no GPU); Ctrl-C to stop",
+                file=self.out,
+            )
             if can_display():
                 webbrowser.open(self.web_url)
         else:
@@ -224,23 +240,26 @@ class RerunOutput:
             )
 
     def hold(self) -> None:
-        """Serve the web viewer until Ctrl-C (a capture is sent at once; the browser reads it
-        from the server), then stop the server."""
+        """Serve the web viewer until Ctrl-C, SIGTERM or SIGHUP (a capture is sent at once;
+        the browser reads it from the server), then stop the server."""
         if self.server is None:
             return
-        print(
-            f"eg2scope: serving the Rerun web viewer at {self.web_url}; Ctrl-C to stop",
-            file=self.out,
-        )
+        from .session import _signals_as_interrupt  # SIGTERM and SIGHUP as Ctrl-C
+
         try:
-            while self.server.poll() is None:
-                time.sleep(0.2)
+            with _signals_as_interrupt():
+                while self.server.poll() is None:
+                    time.sleep(0.2)
         except KeyboardInterrupt:
             pass
         self.stop_server()
 
     def stop_server(self) -> None:
+        """Stop a served web viewer. The stream lets go of it first: everything sent is
+        flushed, and nothing is left to send to a server that is gone (Rerun would report a
+        failed flush at exit)."""
         if self.server is not None and self.server.poll() is None:
+            self.stream.disconnect()
             self.server.terminate()
             try:
                 self.server.wait(5)
@@ -302,9 +321,14 @@ def _serve_web() -> tuple[subprocess.Popen[bytes], str, str]:
     ]
     quiet = subprocess.DEVNULL  # its banner and log lines are not ours to show
     # its own session: Ctrl-C in the terminal reaches eg2scope, which stops it after the last
-    # data is sent
+    # data is sent; on Linux the kernel also ends it if eg2scope dies without stopping it
     server = subprocess.Popen(
-        cmd, stdin=quiet, stdout=quiet, stderr=quiet, start_new_session=sys.platform != "win32"
+        cmd,
+        stdin=quiet,
+        stdout=quiet,
+        stderr=quiet,
+        start_new_session=sys.platform != "win32",
+        preexec_fn=_end_with_parent(),
     )
     deadline = time.monotonic() + 20.0
     while not _listening(grpc_port) or not _listening(web_port):
@@ -316,7 +340,26 @@ def _serve_web() -> tuple[subprocess.Popen[bytes], str, str]:
         time.sleep(0.05)
     grpc_url = f"rerun+http://{LOCALHOST}:{grpc_port}/proxy"
     web_url = f"http://{LOCALHOST}:{web_port}/?url={quote(grpc_url, safe='')}"
-    return server, grpc_url, web_url
+    return server, grpc_url, f"{web_url}&renderer={WEB_RENDERER}"
+
+
+def _end_with_parent() -> Any:
+    """On Linux, a function for the child to run before it starts: the kernel sends it SIGTERM
+    when eg2scope's process ends, however it ends (prctl PR_SET_PDEATHSIG). None elsewhere,
+    and off the main thread (the kernel watches the thread that forks, not the process).
+    The C function is looked up here, before the fork: the child only calls it."""
+    if not sys.platform.startswith("linux"):
+        return None
+    if threading.current_thread() is not threading.main_thread():
+        return None  # the signal follows the thread that forks: it would end with that thread
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    set_parent_death_signal = 1  # PR_SET_PDEATHSIG
+    return lambda: prctl(set_parent_death_signal, int(signal.SIGTERM), 0, 0, 0)
 
 
 def _listening(port: int) -> bool:

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from typing import Any
 
+from ..batches import ENGINES, session_engine
 from ..errors import EXIT_INTERRUPTED, UsageError
 from ..rerun_target import (
     SERVE_WEB,
@@ -40,7 +42,9 @@ def add_subparser(sub: Any) -> None:
             "reading is plotted (nothing is downsampled), on the timelines capture_time and "
             "frame (the record's seq, as the TUI and the recording number it). By default the "
             "Rerun viewer is spawned when a display can be opened; otherwise <capture>.rrd is "
-            "written in the current directory and the command that opens it is printed."
+            "written in the current directory and the command that opens it is printed. The "
+            "layout shows a plot only for what the capture carries, every plot of a capture "
+            "over its whole span on one linked time axis (see docs/rerun.md)."
         ),
         epilog=(
             "examples:\n"
@@ -75,7 +79,8 @@ def add_subparser(sub: Any) -> None:
     where.add_argument(
         "--serve-web",
         action="store_true",
-        help="serve Rerun's web viewer on 127.0.0.1 (this machine only) until Ctrl-C",
+        help="serve Rerun's web viewer on 127.0.0.1 (this machine only) until Ctrl-C or "
+        "SIGTERM; the printed address asks for the WebGL renderer, which needs no GPU",
     )
     capture = parser.add_argument_group("capture replay")
     capture.add_argument(
@@ -87,6 +92,14 @@ def add_subparser(sub: Any) -> None:
         "(default: all at once)",
     )
     capture.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    capture.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="auto",
+        help="the session's decoding: auto (the native core for CAN captures where it is built, "
+        "else the Python decoders; default), python, or native (a usage error where it cannot "
+        "decode the capture). The plot is the same either way",
+    )
     add_source_arguments(parser)
     parser.add_argument(
         "--demo",
@@ -147,10 +160,15 @@ def plot_capture(args: argparse.Namespace) -> int:
         bus=args.bus,
         speed=args.speed,
         progress=not args.no_progress,
+        engine=args.engine,
     )
     target = chosen_target(args, args.file)
     reader = open_reader(opts)  # a capture that cannot be read fails before a viewer opens
     try:
+        try:  # an engine that cannot decode this capture: said before a viewer opens
+            session_engine(args.engine, reader.kind, reader.single_stream)
+        except ValueError as exc:
+            raise UsageError(f"--engine {args.engine}: {exc}") from None
         # a paced replay is watched as it goes: update the viewer as often as live
         flush = LIVE_FLUSH_S if args.speed is not None else None
         listener = RerunListener(target, flush_interval=flush)
@@ -174,7 +192,9 @@ def plot_live(args: argparse.Namespace) -> int:
         return _plot_demo(args)
     taps = open_taps(args)  # usage errors before a viewer opens
     listener = RerunListener(chosen_target(args, args.output), live=True)
-    return _finish_live(listener, run_session(args, taps, show=None, extra=[listener]))
+    start = time.monotonic()
+    code = run_session(args, taps, show=None, extra=[listener])
+    return _finish_live(args, listener, code, time.monotonic() - start)
 
 
 def _plot_demo(args: argparse.Namespace) -> int:
@@ -182,12 +202,15 @@ def _plot_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     listener = RerunListener(chosen_target(args, args.output), live=True)
-    return _finish_live(listener, run_demo(args, show=None, extra=[listener]))
+    start = time.monotonic()
+    code = run_demo(args, show=None, extra=[listener])
+    return _finish_live(args, listener, code, time.monotonic() - start)
 
 
-def _finish_live(listener: Any, code: int) -> int:
-    """A served web viewer stays up after a session that ran its course (--duration)."""
-    if code != EXIT_INTERRUPTED:
+def _finish_live(args: argparse.Namespace, listener: Any, code: int, ran_s: float) -> int:
+    """A served web viewer stays up after a session that ran its course (``--duration``),
+    until Ctrl-C; a session ended by Ctrl-C or SIGTERM ends it at once."""
+    if args.duration is not None and ran_s >= args.duration and code != EXIT_INTERRUPTED:
         listener.output.hold()
     listener.output.stop_server()
     return code

@@ -7,8 +7,9 @@ batch for the entities that share their rows, one chunk per entity; never one ``
 value): every ``flush_interval`` seconds (a live viewer is updated ten times a second), whenever
 ``max_rows`` records and samples are waiting, and at the end. Nothing is downsampled. Each row
 carries ``capture_time`` (the record's ``t``) and ``frame`` (its ``seq``); a capture without
-timestamps (a raw serial dump) has ``frame`` only. The default blueprint is sent again whenever a
-gripper or bus appears.
+timestamps (a raw serial dump) has ``frame`` only. The default blueprint (``rerun_blueprint``)
+shows the entities that have rows: a viewer that watches gets a new one whenever a gripper, a
+bus or a quantity appears; a capture's file gets that of the whole capture at the end.
 
 The hot path does as little per value as it can. A state sample is filed under its gripper and
 the fields it changed (its "shape": a CAN reply of force, opening, current and temperature is one
@@ -22,6 +23,7 @@ sent outside the buffers' lock, so the session goes on decoding meanwhile.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from array import array
@@ -46,7 +48,7 @@ from ..listener import Listener
 from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
 from ..rerun_blueprint import Layout, blueprint
 from ..rerun_target import RerunOutput, RerunTarget, parse_target
-from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches
+from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
 
 NAN: Final = float("nan")  # no timestamp
 # a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
@@ -56,7 +58,6 @@ CAPTURE_FLUSH_S: Final = 2.0  # a capture read at full speed: few, large chunks
 LAYOUT_EVERY_S: Final = 1.0  # the blueprint is sent again at most this often
 MAX_ROWS: Final = 250_000  # records and samples waiting before a flush, whatever the time
 
-RATES: Final = ("frames_per_s", "errors_per_s", "unanswered_per_s")
 SCALAR: Final = "scalar"
 LANE: Final = "lane"
 TEXT: Final = "text"
@@ -267,17 +268,29 @@ class _Bus:
     capture time (a point at the end of each second; a silent stretch drops to zero), and every
     latency. Record times are gathered as they come and counted per second when sent."""
 
-    __slots__ = ("errors", "health", "latency", "nonframes", "problems", "times", "unanswered")
+    __slots__ = (
+        "errors",
+        "health",
+        "highest_rate",
+        "last_t",
+        "latency",
+        "nonframes",
+        "problems",
+        "times",
+        "unanswered",
+    )
 
     def __init__(self, bus: str) -> None:
         base = ent.bus_path(bus)
         self.errors = _Columns(f"{base}/{ent.ERRORS}", TEXT)
         health = f"{base}/{ent.HEALTH}"
-        self.latency = _Columns(f"{health}/latency_ms", SCALAR, ent.health_style("latency_ms"))
+        self.latency = _Columns(f"{health}/{ent.LATENCY}", SCALAR, ent.health_style(ent.LATENCY))
         self.health = {
             name: _Columns(f"{health}/{name}", SCALAR, ent.health_style(name), frame=False)
-            for name in RATES
+            for name in ent.RATES
         }
+        self.highest_rate = 0.0  # the health plot's y range leaves room above it
+        self.last_t = -math.inf  # the bus's last record: where the last, partial second ends
         self.times = array("d")  # every record's t
         self.nonframes = array("d")  # ... of garbage and truncated records
         self.problems = array("d")  # ... of records with errors
@@ -302,7 +315,9 @@ class _Bus:
             "errors_per_s": self._per_second("problems", secs, last, final),
             "unanswered_per_s": self._per_second("unanswered", secs, last, final),
         }
-        ends, zeros = secs + 1, _silent(secs)
+        # a point at the end of each second; the capture's last, partial second at its end
+        ends, zeros = np.minimum(secs + 1, self.last_t), _silent(secs)
+        self.highest_rate = max(self.highest_rate, float(counts["frames_per_s"].max()))
         for name, values in counts.items():
             t = np.concatenate([ends, zeros])
             order = np.argsort(t, kind="stable")
@@ -369,6 +384,10 @@ class RerunListener(Listener):
         # shape with nothing plotted (a poll's last_command, a write's latency)
         self._shapes: dict[tuple[str, int, tuple[str, ...]], _Shape] = {}
         self._timed = self._untimed = False  # rows with and without capture_time were sent
+        self._seq_span = (math.inf, -math.inf)  # the first and last record's seq and t
+        self._time_span = (math.inf, -math.inf)
+        self._sent_paths: set[str] = set()  # entities with rows (only flushes add to it)
+        self._highest: dict[str, float] = {}  # plot origin -> its highest value sent
         self._sent_layout: Layout | None = self.layout if live else None
         self._pending = 0
         self._next_flush = time.monotonic() + self.flush_interval  # when a flush is due
@@ -418,11 +437,16 @@ class RerunListener(Listener):
             stamps = np.array(times, dtype=np.float64)  # None -> NaN
             latencies = np.array(column(records, "latency_ms"), dtype=np.float64)
             seqs = np.array(column(records, "seq"), dtype=np.int64)
+            self._extend_span(stamps, seqs)
             shown = _shown(records)
             for name, lo, hi in _runs(column(records, "bus")):
                 bus = self.buses.get(name) or self._bus(name)
                 part = times[lo:hi]
-                bus.times.fromlist(part if None not in part else [t for t in part if t is not None])
+                if None in part:
+                    part = [t for t in part if t is not None]
+                if part:
+                    bus.times.fromlist(part)
+                    bus.last_t = max(bus.last_t, max(part))
                 for i in shown[bisect_left(shown, lo) : bisect_left(shown, hi)]:
                     rec = records[i]
                     if rec.errors or rec.warnings:
@@ -437,6 +461,17 @@ class RerunListener(Listener):
                     latency.seq.frombytes(seqs[lo:hi][timed].tobytes())  # type: ignore[union-attr]
                     latency.values.frombytes(latencies[lo:hi][timed].tobytes())
             self._pending += len(records)
+
+    def _extend_span(self, stamps: np.ndarray, seqs: np.ndarray) -> None:
+        """The first and last record on each timeline so far (the plots of a capture span
+        them)."""
+        if len(seqs):
+            first, last = self._seq_span
+            self._seq_span = (min(first, int(seqs.min())), max(last, int(seqs.max())))
+        timed = stamps[~np.isnan(stamps)]
+        if len(timed):
+            first_t, last_t = self._time_span
+            self._time_span = (min(first_t, float(timed.min())), max(last_t, float(timed.max())))
 
     def _problem(self, bus: _Bus, rec: Record) -> None:
         """A record with errors or warnings: the error log, a fault mark, the health counts."""
@@ -476,9 +511,7 @@ class RerunListener(Listener):
                 columns = bus.errors
             else:
                 if self.session_errors is None:
-                    path = f"/{ent.SESSION}/{ent.ERRORS}"
-                    self.session_errors = _Columns(path, TEXT, frame=False)
-                    self.layout = self.layout.with_session_log()
+                    self.session_errors = _Columns(ent.SESSION_ERRORS, TEXT, frame=False)
                 columns = self.session_errors
             level = _LEVELS.get(LEVEL_NAMES.get(event.level, "info"), "INFO")
             columns.add(event.t, None, event.message, level)
@@ -568,17 +601,41 @@ class RerunListener(Listener):
                 self._send_entity(c, *rows)
             self._batches.send(self.stream)
             with self._lock:
-                for key in readings:
-                    self.layout = self.layout.with_gripper(*key)
-                if not self._timed and self._untimed:  # no timestamps: the frame timeline only
-                    self.layout = self.layout.with_timeline(ent.FRAME)
+                self.layout = self._grown_layout(readings, final)
                 layout = self.layout
             mono = time.monotonic()
-            if layout != self._sent_layout and (final or mono >= self._next_layout):
-                # grippers appear in bursts when a session starts: a blueprint a second at most
+            # grippers appear in bursts when a session starts: a blueprint a second at most,
+            # and only for a viewer that watches; a capture read at full speed gets the one
+            # it attaches with (a file: none, the data goes there from now on) and the last
+            watched = self.flush_interval < CAPTURE_FLUSH_S
+            if not (final or watched or self.output.attached) and self.output.is_file:
+                self.output.attach(None)
+            due = final or not self.output.attached or (watched and mono >= self._next_layout)
+            if layout != self._sent_layout and due:
                 self.output.show(blueprint(layout))
                 self._sent_layout = layout
                 self._next_layout = mono + LAYOUT_EVERY_S
+
+    def _grown_layout(self, readings: list[tuple[str, int]], final: bool) -> Layout:
+        """The layout with what this flush sent: grippers with readings, entities with rows,
+        the timeline, the plots' y ranges; at the end of a capture, its span."""
+        layout = self.layout.with_paths(self._sent_paths)
+        for key in readings:
+            layout = layout.with_gripper(*key)
+        if not self._timed and self._untimed:  # no timestamps: the frame timeline only
+            layout = layout.with_timeline(ent.FRAME)
+        for bus_name, bus in self.buses.items():
+            if bus.highest_rate:
+                self._highest[f"{ent.bus_path(bus_name)}/{ent.HEALTH}"] = bus.highest_rate
+        for origin, highest in self._highest.items():
+            layout = layout.with_ceiling(origin, highest)
+        if final and not self.live:
+            first, last = self._seq_span if layout.timeline == ent.FRAME else self._time_span
+            if first <= last:
+                if layout.timeline == ent.CAPTURE_TIME:
+                    first, last = nanoseconds(np.array([first, last])).tolist()
+                layout = layout.with_span(int(first), int(last))
+        return layout
 
     def _columns(self, final: bool) -> list[_Columns]:
         """The commands, error logs and health columns (the finished seconds counted)."""
@@ -606,7 +663,11 @@ class RerunListener(Listener):
         marks. Whether readings or settings were sent."""
         forces: list[tuple[np.ndarray, np.ndarray]] = []  # (seq, force) of the readings sent
         faults: list[tuple[np.ndarray, np.ndarray]] = []  # (t, seq) of fault readings
+        force_plot = f"{ent.gripper_path(*g.key)}/{ent.FORCE}"
         for field, t, seq, values in rows:
+            if field in ("force", "force_setting") and len(values):  # the plot's y range
+                highest = float(np.max(values))
+                self._highest[force_plot] = max(self._highest.get(force_plot, 0.0), highest)
             if field == "force":
                 forces.append((seq, values))
             elif field == "fault":
@@ -683,6 +744,7 @@ class RerunListener(Listener):
             self._timed = True
         else:
             self._untimed = True
+        self._sent_paths.add(e.path)
         descriptors: tuple[Any, ...]
         if e.kind == SCALAR:
             descriptors, values = SCALARS, [pa.array(data, pa.float64())]

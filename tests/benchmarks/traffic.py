@@ -135,3 +135,47 @@ def can_frames(
             t += 0.00012
             yield b.can_read_response(dev, 1128, b.u16le(0, g.state), t=t)
         count += 2
+
+
+UNDOCUMENTED_CAN_ADDRESS = 1200  # in no register of the manual's map
+
+
+def warning_can_frames(
+    n: int, seed: int = 4, t0: float = 1_763_700_000.0, devices: int = 4
+) -> Iterator[CanFrame]:
+    """A host that breaks the manual's rules on every command: ``devices`` grippers addressed in
+    turn 0.25 ms apart (each sees a command every ``devices`` x 0.25 ms, well inside the 5 ms
+    the manual asks for), interleaving polls of 1120 and 1128, moves written at 1020,
+    broadcast writes (device 16383, unanswered) and reads of an undocumented address. Every
+    request draws at least one warning; the replies still carry readings to plot."""
+    rng = random.Random(seed)
+    grippers = [Gripper(rng) for _ in range(devices)]
+    t = t0
+    count = 0
+    turn = 0
+    while count < n:
+        dev = turn % devices
+        kind = turn // devices % 5
+        turn += 1
+        g = grippers[dev]
+        g.step()
+        dev += 1
+        t += 0.00025
+        answer = t + 0.0001
+        if kind == 0:
+            yield b.can_read_request(dev, 1120, 8, t=t)
+            data = b.u16le(g.force, g.opening, g.current, g.temperature)
+            yield b.can_read_response(dev, 1120, data, t=answer)
+        elif kind == 1:
+            yield b.can_read_request(dev, 1128, 4, t=t)
+            yield b.can_read_response(dev, 1128, b.u16le(0, g.state), t=answer)
+        elif kind == 2:
+            yield b.can_write_request(dev, 1020, b.u16le(g.target, 500, 500), t=t)
+            yield b.can_write_response(dev, 1020, 6, t=answer)
+        elif kind == 3:
+            yield b.can_write_request(0x3FFF, 1020, b.u16le(g.target, 500, 500), t=t)
+            count -= 1  # nobody answers a broadcast
+        else:
+            yield b.can_read_request(dev, UNDOCUMENTED_CAN_ADDRESS, 2, t=t)
+            yield b.can_read_response(dev, UNDOCUMENTED_CAN_ADDRESS, b.u16le(7), t=answer)
+        count += 2

@@ -1,9 +1,13 @@
 """The inputs the Rerun tests plot: the sample captures, the candump capture written again as
-python-can .asc and as an eg2scope .mcap recording, and two small captures with faults; and a
-listener that collects what a session decoded."""
+python-can .asc and .blf and as an eg2scope .mcap recording, a mixed three-bus recording of the
+demo (``eg2scope record --demo``), and two small captures with faults; the engines each can be
+decoded with; and a listener that collects what a session decoded."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -82,12 +86,24 @@ def faults_serial(tmp: Path) -> Path:
     return path
 
 
-def asc_from_candump(tmp: Path) -> Path:
-    """The candump capture written again by python-can's own .asc writer."""
-    path = tmp / "can_pick_place.asc"
+def python_can_copy(tmp: Path, suffix: str) -> Path:
+    """The candump capture written again by python-can's own writer for ``suffix``."""
+    path = tmp / f"can_pick_place{suffix}"
     with can.Logger(str(path)) as logger:
         for msg in can.LogReader(str(CAPTURES / "can_pick_place.log")):
             logger.on_message_received(msg)
+    return path
+
+
+@cache
+def demo_recording() -> Path:
+    """A mixed recording of the demo on all three buses (``record --demo``), made once per
+    test process: the simulated grippers on two ptys and the virtual CAN bus."""
+    import tempfile
+
+    path = Path(tempfile.mkdtemp(prefix="eg2-rerun-")) / "demo.mcap"
+    cmd = [sys.executable, "-m", "analyzer", "record", "--demo", "-o", str(path)]
+    subprocess.run([*cmd, "--duration", "3"], cwd=ROOT, check=True, capture_output=True)
     return path
 
 
@@ -101,11 +117,24 @@ def mcap_from_candump(tmp: Path) -> Path:
 
 INPUTS = {
     "candump": lambda tmp: CAPTURES / "can_pick_place.log",
-    "asc": asc_from_candump,
+    "asc": lambda tmp: python_can_copy(tmp, ".asc"),
+    "blf": lambda tmp: python_can_copy(tmp, ".blf"),
     "serial": lambda tmp: CAPTURES / "serial_session.bin",
     "modbus": lambda tmp: CAPTURES / "modbus_session.bin",
     "mcap": mcap_from_candump,
+    "mixed": lambda tmp: demo_recording(),
     "faults_can": faults_can,
     "faults_serial": faults_serial,
 }
-TIMED = {"candump", "asc", "mcap", "faults_can"}
+TIMED = {"candump", "asc", "blf", "mcap", "mixed", "faults_can"}
+CAN_ONLY = {"candump", "asc", "blf", "mcap", "faults_can"}  # sessions the native engine decodes
+
+
+def engines(name: str) -> list[str]:
+    """The session engines an input can be decoded with: CAN input on both, byte streams
+    (and a recording that has them) on the Python decoders only."""
+    return ["python", "native"] if name in CAN_ONLY else ["python"]
+
+
+# (input, engine) for every input on every engine it can be decoded with
+CASES = [(name, engine) for name in INPUTS for engine in engines(name)]

@@ -21,9 +21,10 @@ from typing import Any
 import can
 import psutil
 import pytest
-from rerun_inputs import CAPTURES, INPUTS, ROOT, TIMED, Collector
-from rrd_helpers import blueprint_text, read_rrd
+from rerun_inputs import CAPTURES, CASES, INPUTS, ROOT, TIMED, Collector
+from rrd_helpers import blueprint_text, read_rrd, views
 
+from analyzer.batches import native_session_available
 from analyzer.cli import main
 from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.rerun_target import (
@@ -60,18 +61,38 @@ def opening_counts(path: Path) -> dict[str, int]:
     return counts
 
 
-@pytest.mark.parametrize("name", ["candump", "asc", "serial", "modbus", "mcap"])
-def test_plot_saves_every_kind_of_input(tmp_path: Path, name: str) -> None:
+@pytest.mark.parametrize(
+    ("name", "engine"),
+    [c for c in CASES if not c[0].startswith("faults")],
+    ids=lambda x: str(x),
+)
+def test_plot_saves_every_kind_of_input(tmp_path: Path, name: str, engine: str) -> None:
+    if engine == "native" and not native_session_available():
+        pytest.skip("the native core is not built")
     capture = INPUTS[name](tmp_path)
     out = tmp_path / "out.rrd"
-    assert main(["plot", str(capture), "--save", str(out), "--no-progress"]) == 0
+    argv = ["plot", str(capture), "--save", str(out), "--no-progress", "--engine", engine]
+    assert main(argv) == 0
     rrd = read_rrd(out)
     counts = opening_counts(capture)
     assert counts
     for path, n in counts.items():
         assert len(rrd[path].values) == n, path
     assert rrd.timelines() == ({"capture_time", "frame"} if name in TIMED else {"frame"})
-    assert rrd.blueprints
+    shown = views(rrd)
+    assert shown and all(v.entities for v in shown)  # no empty view
+
+
+def test_native_engine_on_a_byte_stream_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "x.rrd"
+    capture = str(CAPTURES / "serial_session.bin")
+    with pytest.raises(SystemExit) as exc:
+        main(["plot", capture, "--engine", "native", "--save", str(out)])
+    assert exc.value.code == 2
+    assert "--engine native" in capsys.readouterr().err
+    assert not out.exists()  # no recording begun
 
 
 @pytest.mark.parametrize(
@@ -95,24 +116,34 @@ def test_without_a_display_plot_writes_the_file_and_says_how_to_open_it(
     assert proc.stdout == ""
 
 
-def test_serve_web_binds_to_localhost_only(tmp_path: Path) -> None:
-    proc = subprocess.Popen(
-        [*EG2SCOPE, "plot", str(CAPTURES / "can_pick_place.log"), "--serve-web"],
+def serve_web(argv: list[str], tmp_path: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [*EG2SCOPE, "plot", *argv, "--serve-web"],
         cwd=tmp_path,
         env={**NO_DISPLAY, "PYTHONPATH": str(ROOT)},
         stderr=subprocess.PIPE,
         text=True,
     )
+
+
+def listening_addresses(tree: list[psutil.Process]) -> list[Any]:
+    return [
+        c.laddr
+        for p in tree
+        if p.is_running()
+        for c in p.net_connections(kind="inet")
+        if c.status == psutil.CONN_LISTEN
+    ]
+
+
+def test_serve_web_binds_to_localhost_only_and_prints_a_webgl_url_once(tmp_path: Path) -> None:
+    proc = serve_web([str(CAPTURES / "can_pick_place.log")], tmp_path)
     try:
-        url = wait_for_serving(proc)
+        url, before = wait_for_serving(proc)
         assert url.startswith("http://127.0.0.1:")
+        assert "renderer=webgl" in url  # WebGPU fails without a GPU; WebGL works everywhere
         tree = [psutil.Process(proc.pid), *psutil.Process(proc.pid).children(recursive=True)]
-        listening = [
-            c.laddr
-            for p in tree
-            for c in p.net_connections(kind="inet")
-            if c.status == psutil.CONN_LISTEN
-        ]
+        listening = listening_addresses(tree)
         assert len(listening) >= 2  # the web viewer and the gRPC proxy
         assert {addr.ip for addr in listening} == {"127.0.0.1"}
         with urllib.request.urlopen(url, timeout=10) as page:
@@ -121,13 +152,64 @@ def test_serve_web_binds_to_localhost_only(tmp_path: Path) -> None:
         proc.send_signal(signal.SIGINT)
         assert proc.wait(30) == 0
         assert not any(c.is_running() and c.status() != psutil.STATUS_ZOMBIE for c in children)
+        assert proc.stderr is not None
+        err = before + proc.stderr.read()
+        assert err.count("http://127.0.0.1:") == 1, err  # the address, once
+        assert "ERROR" not in err and "flush" not in err, err  # no failed flush at exit
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
 
 
-def wait_for_serving(proc: subprocess.Popen[str]) -> str:
+@pytest.mark.parametrize(
+    "argv", [[str(CAPTURES / "serial_session.bin")], ["--demo"]], ids=["capture", "live"]
+)
+def test_sigterm_ends_the_web_viewer_it_started(tmp_path: Path, argv: list[str]) -> None:
+    """SIGTERM (a service manager, ``kill``) stops plot --serve-web and the viewer server it
+    started: no process left, its ports free, nothing reported as failed."""
+    proc = serve_web(argv, tmp_path)
+    try:
+        _, before = wait_for_serving(proc)
+        children = psutil.Process(proc.pid).children(recursive=True)
+        assert listening_addresses(children)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(30)
+        assert code == 0 if argv[0] != "--demo" else code in (0, 130)  # live: exits.md's
+        psutil.wait_procs(children, timeout=10)
+        assert not any(c.is_running() and c.status() != psutil.STATUS_ZOMBIE for c in children)
+        assert proc.stderr is not None
+        err = before + proc.stderr.read()
+        assert "ERROR" not in err and "Traceback" not in err, err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_the_web_viewer_ends_when_eg2scope_is_killed(tmp_path: Path) -> None:
+    """Killed outright (SIGKILL: no handler runs), eg2scope still takes its viewer server
+    with it: the kernel ends the child when its parent dies (Linux)."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the parent-death signal is Linux's")
+    proc = serve_web([str(CAPTURES / "can_pick_place.log")], tmp_path)
+    try:
+        wait_for_serving(proc)
+        children = psutil.Process(proc.pid).children(recursive=True)
+        assert children
+        proc.kill()
+        proc.wait(10)
+        _, alive = psutil.wait_procs(children, timeout=10)
+        assert not alive
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def wait_for_serving(proc: subprocess.Popen[str]) -> tuple[str, str]:
+    """The address plot prints, and its stderr up to it."""
     assert proc.stderr is not None
     deadline = time.monotonic() + 60
     lines = []
@@ -136,9 +218,9 @@ def wait_for_serving(proc: subprocess.Popen[str]) -> str:
         if not line:
             break
         lines.append(line)
-        found = re.search(r"serving the Rerun web viewer at (\S+);", line)
+        found = re.search(r"serving the Rerun web viewer at (\S+) ", line)
         if found:
-            return found.group(1)
+            return found.group(1), "".join(lines)
     raise AssertionError(f"never served: {''.join(lines)}")
 
 
@@ -207,6 +289,11 @@ def test_plot_demo_live_on_ptys_and_the_virtual_can_bus(tmp_path: Path) -> None:
     assert "'ContainerBlueprint:container_kind': [[1]]" in text  # six grippers: tabs
     for bus in ("rs232", "rs485", "can0"):
         assert f"'ContainerBlueprint:display_name': [['{bus}']]" in text
+    shown = views(rrd)  # grown as quantities appeared: each view has data
+    assert all(v.entities for v in shown)
+    names = {v.name for v in shown}
+    assert "can0 ID 1: force" in names and "can0 ID 1: current" not in names  # CAN polls none
+    assert "rs485 ID 1: current" in names
 
 
 def run_main_while(argv: list[str], feed: Any) -> int:

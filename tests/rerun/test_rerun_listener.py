@@ -17,13 +17,14 @@ from typing import Any
 
 import can
 import pytest
-from rerun_inputs import INPUTS, TIMED, Collector
-from rrd_helpers import Rrd, blueprint_text, read_rrd
+from rerun_inputs import CASES, INPUTS, TIMED, Collector
+from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
+from analyzer.batches import native_session_available
 from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.listener import make_listener
 from analyzer.model import StateSample
-from analyzer.rerun_blueprint import Layout, blueprint
+from analyzer.rerun_blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
 from analyzer.session import live_session
 from analyzer.sinks.rerun import RerunListener
 from analyzer.sources.can_tap import CanTap
@@ -44,6 +45,8 @@ SCALARS = {
     "temperature_c": "temperature_c",
 }
 LANES = {"state": "state", "fault": "fault"}
+PLOTTED = set(SCALARS) | set(LANES)
+CURRENT_TEMPERATURE = (": current", ": temperature (°C)")
 MM = {"opening", "target_opening"}
 READ_CODES = {
     "eg2-serial": {c.value for c in Cmd if c.name.startswith("READ_")},
@@ -52,18 +55,40 @@ READ_CODES = {
 }
 
 
-def plot(path: Path, out: Path) -> tuple[Collector, Rrd]:
+def plot(path: Path, out: Path, engine: str = "python") -> tuple[Collector, Rrd]:
     collector = Collector()
     listener = RerunListener(str(out))
-    session, _ = run_capture(CaptureOptions(str(path), progress=False), [collector, listener])
+    opts = CaptureOptions(str(path), progress=False, engine=engine)
+    session, _ = run_capture(opts, [collector, listener])
     assert not session.detached
     return collector, read_rrd(out)
 
 
+class Plotted:
+    """Each input plotted once per engine (on first use), and what its session decoded."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.tmp = tmp
+        self.done: dict[tuple[str, str], tuple[Collector, Rrd]] = {}
+
+    def __getitem__(self, key: str | tuple[str, str]) -> tuple[Collector, Rrd]:
+        name, engine = (key, "python") if isinstance(key, str) else key
+        if engine == "native" and not native_session_available():
+            pytest.skip("the native core is not built")
+        if (name, engine) not in self.done:
+            capture = INPUTS[name](self.tmp)
+            self.done[(name, engine)] = plot(capture, self.tmp / f"{name}-{engine}.rrd", engine)
+        return self.done[(name, engine)]
+
+
 @pytest.fixture(scope="module")
-def plotted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Collector, Rrd]]:
-    tmp = tmp_path_factory.mktemp("rerun")
-    return {name: plot(make(tmp), tmp / f"{name}.rrd") for name, make in INPUTS.items()}
+def plotted(tmp_path_factory: pytest.TempPathFactory) -> Plotted:
+    return Plotted(tmp_path_factory.mktemp("rerun"))
+
+
+CASE_IDS = [f"{name}-{engine}" for name, engine in CASES]
+TIMED_CASES = [c for c in CASES if c[0] in TIMED]
+TIMED_IDS = [f"{name}-{engine}" for name, engine in TIMED_CASES]
 
 
 # -- expectations ------------------------------------------------------------------------------
@@ -114,11 +139,11 @@ def faulty(collector: Collector) -> dict[str, list[tuple[float | None, int]]]:
 # -- the tests ---------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", list(INPUTS))
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
 def test_every_state_sample_is_plotted_with_its_time_seq_and_value(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
+    plotted: Plotted, name: str, engine: str
 ) -> None:
-    collector, rrd = plotted[name]
+    collector, rrd = plotted[name, engine]
     expected = expected_series(collector.samples)
     assert expected, "the capture has readings"
     for path, rows in expected.items():
@@ -143,7 +168,7 @@ def test_every_state_sample_is_plotted_with_its_time_seq_and_value(
 
 
 def test_each_gripper_of_a_can_capture_has_every_entity_of_the_contract(
-    plotted: dict[str, tuple[Collector, Rrd]],
+    plotted: Plotted,
 ) -> None:
     _, rrd = plotted["candump"]
     for device in (1, 2):
@@ -154,7 +179,7 @@ def test_each_gripper_of_a_can_capture_has_every_entity_of_the_contract(
 
 
 def test_opening_points_equal_the_opening_readings_in_the_decoded_records(
-    plotted: dict[str, tuple[Collector, Rrd]],
+    plotted: Plotted,
 ) -> None:
     """Counted from the records themselves, not the tracker: no reading lost to batching."""
     collector, rrd = plotted["candump"]
@@ -172,11 +197,9 @@ def test_opening_points_equal_the_opening_readings_in_the_decoded_records(
         assert plotted_mm == pytest.approx([opening_mm(v) for v in readings])
 
 
-@pytest.mark.parametrize("name", list(INPUTS))
-def test_two_timelines_and_no_sdk_timelines(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
-) -> None:
-    _, rrd = plotted[name]
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
+def test_two_timelines_and_no_sdk_timelines(plotted: Plotted, name: str, engine: str) -> None:
+    _, rrd = plotted[name, engine]
     data = {p: e for p, e in rrd.entities.items() if e.values}
     if name in TIMED:
         assert rrd.timelines() == {"capture_time", "frame"}
@@ -188,32 +211,118 @@ def test_two_timelines_and_no_sdk_timelines(
     assert rrd.recordings == 1
 
 
-@pytest.mark.parametrize("name", list(INPUTS))
-def test_the_blueprint_is_in_the_file_with_a_column_per_gripper(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
-) -> None:
-    collector, rrd = plotted[name]
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
+def test_every_view_of_the_blueprint_has_data(plotted: Plotted, name: str, engine: str) -> None:
+    """The blueprint is read back from the file and each view's query resolved against the
+    recording: every view shows at least one entity with rows of what it draws, and every
+    entity it names has them."""
+    _, rrd = plotted[name, engine]
     assert rrd.blueprints, "a default blueprint in every .rrd"
+    shown = views(rrd)
+    assert shown
+    for view in shown:
+        assert view.entities, f"{view.name} is empty"
+        named = [q for q in view.query if q.startswith("/")]
+        assert set(named) <= set(view.entities), view.name
+
+
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
+def test_a_view_for_every_quantity_the_capture_carries_and_none_other(
+    plotted: Plotted, name: str, engine: str
+) -> None:
+    """The plots and lanes show exactly the entities the tracker gave samples for: a column
+    per gripper with readings or settings, a plot per quantity it has."""
+    collector, rrd = plotted[name, engine]
+    shown = views(rrd)
+    drawn = {e for v in shown if v.kind != "TextLog" for e in v.entities}
+    gripper_rows = {e for e in drawn if e.split("/")[2].isdigit() and "faults" not in e}
+    assert gripper_rows == set(expected_series(collector.samples))
+    grippers = {(s.bus, s.device) for s in collector.samples if set(s.changed) & PLOTTED}
+    titled = {v.name.split(":")[0] for v in shown if v.kind != "TextLog" and " ID " in v.name}
+    assert titled == {f"{bus} ID {device}" for bus, device in grippers}
+    for path, e in rrd.entities.items():  # every log and health entity with rows has a view
+        if e.values and not path.split("/")[2].isdigit():
+            assert any(path in v.entities for v in shown), path
+
+
+def test_no_plot_for_what_the_capture_does_not_carry(plotted: Plotted) -> None:
+    """The issue's cases: RS232 run-state polls carry no current; the CAN demo polls no
+    current or temperature; a gripper that never answered (serial ID 2) gets no column."""
+    names = {v.name for v in views(plotted["serial"][1])}
+    assert "serial ID 1: current" not in names
+    assert not any(n.startswith("serial ID 2") for n in names)
+    assert "serial ID 1: opening (mm)" in names
+    names = {v.name for v in views(plotted["mixed"][1])}
+    for device in (1, 2):
+        assert f"can0 ID {device}: force" in names
+        assert f"can0 ID {device}: current" not in names
+        assert f"can0 ID {device}: temperature (°C)" not in names
+        assert f"rs485 ID {device}: current" in names
+
+
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
+def test_every_plot_spans_the_whole_capture_on_one_axis(
+    plotted: Plotted, name: str, engine: str
+) -> None:
+    """Plots are linked to the viewer's shared time axis, which is set to the capture's first
+    and last record (seq for a raw dump, time otherwise); no row lies outside it."""
+    collector, rrd = plotted[name, engine]
+    timed = name in TIMED
+    if timed:
+        stamps = [ns(r.t) for r in collector.records if r.t is not None]
+        first, last = min(stamps), max(stamps)
+    else:
+        first = min(r.seq for r in collector.records)
+        last = max(r.seq for r in collector.records)
+    span = shared_time_range(rrd)
+    assert span is not None
+    assert abs(span["start"] - first) <= 1000 and abs(span["end"] - last) <= 1000  # t * 1e9
+    for view in views(rrd):
+        if view.kind != "TextLog":
+            assert view.properties["TimeAxis:link"] == [2], view.name  # LinkToGlobal
+            assert "TimeAxis:view_range" not in view.properties, view.name
+    timeline = "capture_time" if timed else "frame"
     text = blueprint_text(rrd)
-    grippers = {(s.bus, s.device) for s in collector.samples if set(s.changed) - {"last_command"}}
-    assert grippers
-    for bus, device in grippers:
-        for origin in ("force", "opening_mm", "current", "temperature_c"):
-            assert f"'/{bus}/{device}/{origin}'" in text, (bus, device, origin)
-        assert f"'{bus} ID {device}'" in text
-    for bus in {s.bus for s in collector.samples}:
-        assert f"'/{bus}/errors'" in text
-    assert "'TimeAxis:link': [[2]]" in text  # linked x axes
-    timeline = "capture_time" if name in TIMED else "frame"
     assert f"'TimePanelBlueprint:timeline': [['{timeline}']]" in text
     assert "VisibleTimeRanges" not in text  # a capture shows all of itself
+    for path, e in rrd.entities.items():
+        at = [x for x in (e.capture_time if timed else e.frame) if x is not None]
+        assert all(span["start"] <= x <= span["end"] for x in at), path
 
 
-@pytest.mark.parametrize("name", list(INPUTS))
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
+def test_plots_are_readable(plotted: Plotted, name: str, engine: str) -> None:
+    """Per gripper, force, opening and the lanes on one page, current and temperature on
+    another; a plot of several series keeps its legend above the data (its y range leaves
+    the top free), a plot of one series has none; rates and milliseconds apart."""
+    _, rrd = plotted[name, engine]
+    for view in views(rrd):
+        if view.kind == "TextLog":
+            continue
+        if " ID " in view.name:
+            electric = view.name.endswith(CURRENT_TEMPERATURE)
+            assert (ELECTRIC_PAGE if electric else MOTION_PAGE) in view.containers, view.name
+        if view.kind != "TimeSeries":
+            continue
+        assert not (
+            any(e.endswith("latency_ms") for e in view.entities)
+            and any(e.endswith("_per_s") for e in view.entities)
+        )
+        if len(view.entities) == 1:
+            assert view.properties["PlotLegend:visible"] == [False], view.name
+            continue
+        assert view.properties["PlotLegend:visible"] == [True], view.name
+        (low, high), *_ = view.properties["ScalarAxis:range"]
+        values = [v for e in view.entities for v in rrd[e].values]
+        assert low <= min(values), view.name
+        assert max(values) <= low + (high - low) * LEGEND_ROOM + 1e-9, view.name
+
+
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
 def test_fault_marks_at_the_times_of_the_faulty_records(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
+    plotted: Plotted, name: str, engine: str
 ) -> None:
-    collector, rrd = plotted[name]
+    collector, rrd = plotted[name, engine]
     want = faulty(collector)
     got = {p: e for p, e in rrd.entities.items() if p.endswith("/force/faults") and e.values}
     assert set(got) == set(want)
@@ -226,7 +335,7 @@ def test_fault_marks_at_the_times_of_the_faulty_records(
 
 
 def test_fault_marks_cover_fault_readings_and_checksum_errors(
-    plotted: dict[str, tuple[Collector, Rrd]],
+    plotted: Plotted,
 ) -> None:
     """The synthetic captures: a CAN fault reading (3: stall, over-temperature) marked once,
     at the force last read; the serial run state with faults and the catch with a bad sum."""
@@ -241,11 +350,11 @@ def test_fault_marks_cover_fault_readings_and_checksum_errors(
     assert rrd["/serial/1/commands"].values == ["catch speed=500 force=100 g"]
 
 
-@pytest.mark.parametrize("name", list(INPUTS))
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
 def test_error_log_has_every_problem_with_its_level(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
+    plotted: Plotted, name: str, engine: str
 ) -> None:
-    collector, rrd = plotted[name]
+    collector, rrd = plotted[name, engine]
     quiet = {FOREIGN, ESTIMATED_TIME}
     want: dict[str, list[tuple[int, str]]] = {}
     for r in collector.records:
@@ -262,11 +371,9 @@ def test_error_log_has_every_problem_with_its_level(
         assert all(": " in text for text in log.values)
 
 
-@pytest.mark.parametrize("name", list(INPUTS))
-def test_commands_in_words_without_the_polls(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
-) -> None:
-    collector, rrd = plotted[name]
+@pytest.mark.parametrize(("name", "engine"), CASES, ids=CASE_IDS)
+def test_commands_in_words_without_the_polls(plotted: Plotted, name: str, engine: str) -> None:
+    collector, rrd = plotted[name, engine]
     want: dict[str, list[tuple[int, str]]] = {}
     for r in collector.records:
         polls = READ_CODES.get(r.protocol, set())
@@ -280,42 +387,44 @@ def test_commands_in_words_without_the_polls(
         assert sorted(zip(got[path].frame, got[path].values, strict=True)) == rows
 
 
-@pytest.mark.parametrize("name", sorted(TIMED))
+@pytest.mark.parametrize(("name", "engine"), TIMED_CASES, ids=TIMED_IDS)
 def test_bus_health_counts_every_frame_error_and_latency(
-    plotted: dict[str, tuple[Collector, Rrd]], name: str
+    plotted: Plotted, name: str, engine: str
 ) -> None:
-    collector, rrd = plotted[name]
-    timed = [r for r in collector.records if r.t is not None]
-    bus = timed[0].bus
-    frames = rrd[f"/{bus}/health/frames_per_s"]
-    assert sum(frames.values) == sum(1 for r in timed if r.kind == FRAME)
-    assert sum(rrd[f"/{bus}/health/errors_per_s"].values) == sum(1 for r in timed if r.errors)
-    unanswered = sum(1 for r in timed if UNANSWERED in r.flags)
-    assert sum(rrd[f"/{bus}/health/unanswered_per_s"].values) == unanswered
-    seconds = sorted({math.floor(r.t) for r in timed if r.t is not None})
-    ends = [t / 1e9 for t, v in zip(frames.capture_time, frames.values, strict=True) if v]
-    assert ends == [s + 1 for s in seconds]  # one point at the end of each second
-    latencies = [r.latency_ms for r in timed if r.latency_ms is not None]
-    assert rrd[f"/{bus}/health/latency_ms"].values == pytest.approx(latencies)
+    collector, rrd = plotted[name, engine]
+    for bus in {r.bus for r in collector.records if r.t is not None}:
+        timed = [r for r in collector.records if r.t is not None and r.bus == bus]
+        frames = rrd[f"/{bus}/health/frames_per_s"]
+        assert sum(frames.values) == sum(1 for r in timed if r.kind == FRAME)
+        errors = rrd[f"/{bus}/health/errors_per_s"].values
+        assert sum(errors) == sum(1 for r in timed if r.errors)
+        unanswered = sum(1 for r in timed if UNANSWERED in r.flags)
+        assert sum(rrd[f"/{bus}/health/unanswered_per_s"].values) == unanswered
+        seconds = sorted({math.floor(r.t) for r in timed if r.t is not None})
+        ends = [t / 1e9 for t, v in zip(frames.capture_time, frames.values, strict=True) if v]
+        last = max(r.t for r in timed if r.t is not None)
+        # one point at the end of each second; the last, partial one at the last record
+        assert ends == pytest.approx([min(s + 1, last) for s in seconds], abs=1e-6)
+        latencies = [r.latency_ms for r in timed if r.latency_ms is not None]
+        assert rrd[f"/{bus}/health/latency_ms"].values == pytest.approx(latencies)
 
 
 def test_health_drops_to_zero_over_a_silent_stretch(
-    plotted: dict[str, tuple[Collector, Rrd]],
+    plotted: Plotted,
 ) -> None:
-    """faults.log: six frames in second 0, two in second 3: seconds 1 and 2 count zero."""
+    """faults.log: six frames in second 0, two in second 3: seconds 1 and 2 count zero; the
+    last second's point is at the last record (3.501 s), not past the capture."""
     _, rrd = plotted["faults_can"]
     frames = rrd["/can0/health/frames_per_s"]
     t0 = 1_763_700_100
-    assert sorted(zip(frames.capture_time, frames.values, strict=True)) == [
-        ((t0 + 1) * 10**9, 6),
-        ((t0 + 2) * 10**9, 0),
-        ((t0 + 3) * 10**9, 0),
-        ((t0 + 4) * 10**9, 2),
-    ]
+    points = sorted(zip(frames.capture_time, frames.values, strict=True))
+    assert [v for _, v in points] == [6, 0, 0, 2]
+    at = [(t0 + 1) * 10**9, (t0 + 2) * 10**9, (t0 + 3) * 10**9, (t0 + 3) * 10**9 + 501_000_000]
+    assert [t for t, _ in points] == pytest.approx(at, abs=1000)  # the float t's nanoseconds
 
 
 def test_series_are_named_and_coloured_once_as_static(
-    plotted: dict[str, tuple[Collector, Rrd]],
+    plotted: Plotted,
 ) -> None:
     _, rrd = plotted["candump"]
     names = {
@@ -357,7 +466,8 @@ def containers(bp: Any) -> list[str]:
 def test_above_four_grippers_a_tab_per_bus(grippers: int, tabs: bool) -> None:
     layout = Layout()
     for i in range(grippers):
-        layout = layout.with_gripper(("can0", "rs485")[i % 2], i + 1)
+        bus = ("can0", "rs485")[i % 2]
+        layout = layout.with_gripper(bus, i + 1).with_paths([f"/{bus}/{i + 1}/force/measured"])
     bp = blueprint(layout)
     kinds = containers(bp)
     assert (kinds[0] == "Tabs") is tabs
@@ -366,12 +476,23 @@ def test_above_four_grippers_a_tab_per_bus(grippers: int, tabs: bool) -> None:
         assert names == ["can0", "rs485"]
 
 
+def test_a_layout_without_rows_has_no_view() -> None:
+    """A gripper seen but with nothing plotted yet (a live session's start): no view, and
+    the viewer is told to make none of its own."""
+    bp = blueprint(Layout(live=True).with_gripper("can0", 1))
+    assert not hasattr(bp, "root_container")
+    assert bp.auto_views is False
+
+
 def test_live_plots_follow_a_ten_second_window() -> None:
-    live = blueprint(Layout(live=True).with_gripper("can0", 1))
-    view = live.root_container.contents[0].contents[0].contents[0]  # the force plot
-    ranges = view.properties["VisibleTimeRanges"]
+    layout = Layout(live=True).with_gripper("can0", 1).with_paths(["/can0/1/force/measured"])
+    live = blueprint(layout)
+    force = live.root_container.contents[0].contents[0].contents[0]  # page, column, plot
+    ranges = force.properties["VisibleTimeRanges"]
     assert "capture_time" in repr(ranges) and "-10000000000" in repr(ranges)
     assert live.time_panel.play_state is not None
+    shared = repr(live.shared_range)  # the shared x axis: the last 10 s
+    assert "cursor_relative" in shared and "-10000000000" in shared
 
 
 def test_the_listener_is_registered_by_name(tmp_path: Path) -> None:
@@ -384,10 +505,12 @@ def test_the_listener_is_registered_by_name(tmp_path: Path) -> None:
 # -- live sessions -----------------------------------------------------------------------------
 
 
-def run_live(taps: list[Any], out: Path, feed: Any) -> tuple[Collector, Rrd, RerunListener]:
+def run_live(
+    taps: list[Any], out: Path, feed: Any, engine: str = "auto"
+) -> tuple[Collector, Rrd, RerunListener]:
     collector = Collector()
     listener = RerunListener(str(out), live=True)
-    session = live_session(taps, [collector, listener])
+    session = live_session(taps, [collector, listener], engine=engine)
     thread = threading.Thread(target=session.run, daemon=True)
     thread.start()
     time.sleep(0.3)  # the taps open
@@ -399,7 +522,10 @@ def run_live(taps: list[Any], out: Path, feed: Any) -> tuple[Collector, Rrd, Rer
     return collector, read_rrd(out), listener
 
 
-def test_live_on_the_virtual_can_bus(tmp_path: Path) -> None:
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
+    if engine == "native" and not native_session_available():
+        pytest.skip("the native core is not built")
     channel = f"eg2-rerun-{os.getpid()}-{time.monotonic_ns()}"
 
     def feed() -> None:
@@ -414,7 +540,8 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path) -> None:
                     sender.send(msg)
                 time.sleep(0.01)
 
-    collector, rrd, _ = run_live([CanTap("can0", "virtual", channel)], tmp_path / "l.rrd", feed)
+    taps = [CanTap("can0", "virtual", channel)]
+    collector, rrd, _ = run_live(taps, tmp_path / "l.rrd", feed, engine)
     opening = rrd["/can0/1/opening_mm/measured"]
     assert opening.values == pytest.approx([opening_mm(1000 - 10 * i) for i in range(60)])
     expected = expected_series(collector.samples)
@@ -423,6 +550,10 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path) -> None:
     assert rrd.timelines() == {"capture_time", "frame"}
     assert "VisibleTimeRanges" in blueprint_text(rrd)  # live: the sliding window
     assert len(rrd["/can0/1/opening_mm/measured"].frame) == 60
+    shown = views(rrd)  # the blueprint grew with the data: a view for each quantity polled
+    assert all(v.entities for v in shown)
+    assert {v.name for v in shown} >= {"can0 ID 1: force", "can0 ID 1: current"}
+    assert not any("state" in v.name for v in shown)  # 1128 was never polled
 
 
 def test_live_on_a_serial_pty(tmp_path: Path) -> None:
@@ -446,6 +577,13 @@ def test_live_on_a_serial_pty(tmp_path: Path) -> None:
     opening = rrd["/rs232/1/opening_mm/measured"]
     assert opening.values == pytest.approx([opening_mm(p) for p in range(1000, 400, -50)])
     assert all(t is not None for t in opening.capture_time)
+    shown = views(rrd)
+    names = {v.name for v in shown}
+    # only the opening was read: no other plot of the gripper (a loaded machine may split a
+    # frame, so the error log may or may not be there)
+    assert {n for n in names if n.startswith("rs232 ID 1")} == {"rs232 ID 1: opening (mm)"}
+    assert {"rs232 frames, errors, unanswered per s", "rs232 latency (ms)"} <= names
+    assert all(v.entities for v in shown)
     assert Counter(s.bus for s in collector.samples) == Counter({"rs232": 24})
 
 
