@@ -6,11 +6,21 @@ import argparse
 import importlib
 import os
 import sys
+import textwrap
 from collections.abc import Sequence
+from contextlib import nullcontext
 
 from . import __version__, native
 from .commands import SUBCOMMANDS
-from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError
+from .errors import (
+    EXIT_ERROR,
+    EXIT_STATUS_HELP,
+    EXIT_USAGE,
+    UsageError,
+    runs_until_stopped,
+    stop_status,
+)
+from .session import signals_as_interrupt
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -23,9 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog=(
             "Run 'eg2scope COMMAND --help' for the options of one command.\n\n"
-            "exit status: 0 done; 1 error (a file or device that cannot be read or written); "
-            "2 usage error; 3 decoded as far as possible, but the input is damaged; "
-            "130 interrupted (Ctrl-C)"
+            + textwrap.fill(EXIT_STATUS_HELP, width=88)
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -44,13 +52,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    # a command that runs until stopped is stopped by SIGTERM and SIGHUP as by Ctrl-C, at any
+    # moment (its session finishes the recording; before the session began, it just ends); a
+    # file job's session handles them while it runs (its forked workers must not inherit them)
+    stopping = signals_as_interrupt() if runs_until_stopped(args) else nullcontext()
     try:
-        code = int(args.func(args) or 0)
+        with stopping:
+            code = int(args.func(args) or 0)
         sys.stdout.flush()  # a pipe closed early shows here, not at interpreter exit
         return code
     except KeyboardInterrupt:
-        print("eg2scope: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        code = stop_status(args)
+        print(f"eg2scope: {'interrupted' if code else 'stopped'}", file=sys.stderr)
+        return code
     except BrokenPipeError:
         # output piped into `head` and the like: stop quietly, as Unix tools do
         devnull = os.open(os.devnull, os.O_WRONLY)

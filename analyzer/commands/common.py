@@ -12,7 +12,7 @@ from typing import Any
 from decoders.model import EG2_CAN, Record
 from decoders.registry import resolve_protocol
 
-from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
+from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..listener import Listener
 from ..model import SourceEvent
 from ..session import Session, SessionCounts, SessionOptions
@@ -282,8 +282,10 @@ def finish_capture(path: str, session: Session, reader: CaptureReader) -> int:
 
 
 def exit_code(counts: SessionCounts, damaged: bool = False, failed: bool = False) -> int:
+    """A session's exit status (docs/contracts.md): a failed output or device is an error; a
+    live session stopped by the user ended as it should (0), a capture cut short is 130."""
     if failed:
-        return 1
-    if counts.interrupted:
+        return EXIT_ERROR
+    if counts.interrupted and not counts.live:
         return EXIT_INTERRUPTED
     return EXIT_DAMAGED if damaged else EXIT_OK

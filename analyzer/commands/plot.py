@@ -16,6 +16,7 @@ from ..rerun_target import (
     default_target,
     save_target,
 )
+from ..session import Session
 from .common import (
     CaptureOptions,
     finish_capture,
@@ -174,7 +175,9 @@ def plot_live(args: argparse.Namespace) -> int:
         return _plot_demo(args)
     taps = open_taps(args)  # usage errors before a viewer opens
     listener = RerunListener(chosen_target(args, args.output), live=True)
-    return _finish_live(listener, run_session(args, taps, show=None, extra=[listener]))
+    ended: list[Session] = []
+    code = run_session(args, taps, show=None, extra=[listener], on_done=ended.append)
+    return _finish_live(listener, code, ended)
 
 
 def _plot_demo(args: argparse.Namespace) -> int:
@@ -182,12 +185,15 @@ def _plot_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     listener = RerunListener(chosen_target(args, args.output), live=True)
-    return _finish_live(listener, run_demo(args, show=None, extra=[listener]))
+    ended: list[Session] = []
+    code = run_demo(args, show=None, extra=[listener], on_done=ended.append)
+    return _finish_live(listener, code, ended)
 
 
-def _finish_live(listener: Any, code: int) -> int:
-    """A served web viewer stays up after a session that ran its course (--duration)."""
-    if code != EXIT_INTERRUPTED:
+def _finish_live(listener: Any, code: int, ended: list[Session]) -> int:
+    """A served web viewer stays up after a session that ran its course (--duration), not
+    after the user stopped it."""
+    if not any(session.counts.interrupted for session in ended):
         listener.output.hold()
     listener.output.stop_server()
     return code
