@@ -134,6 +134,12 @@ class Session:
         """End the session from another thread (the TUI's quit, a test)."""
         self._stop.set()
 
+    def interrupt(self) -> None:
+        """End the session as Ctrl-C ends it, from another thread (a signal that a view on the
+        main thread received): a capture cut short exits 130, a live one is stopped (0)."""
+        self.counts.interrupted = True
+        self._stop.set()
+
     def _finish(self) -> None:
         try:
             rest = self.source.stop()
@@ -282,21 +288,29 @@ def rare_gc() -> Iterator[None]:
 
 
 @contextmanager
-def signals_as_interrupt(finishing: Callable[[], bool] | None = None) -> Iterator[None]:
-    """Ctrl-C, SIGTERM (kill, ``systemctl stop``) and SIGHUP (terminal closed) raise
-    KeyboardInterrupt, so a session ends cleanly and its recordings are finished; while
-    ``finishing()`` is true they are ignored (one is enough: a second must not cut the end of
-    a recording off). Ctrl-C and SIGHUP that the process was told to ignore (a background job
-    of a script, ``nohup``) stay ignored; SIGTERM, which nothing ignores on purpose, never is.
-    Only possible from the main thread; elsewhere nothing changes."""
+def signals_call(callback: Callable[[], None]) -> Iterator[None]:
+    """While the block runs (a view that owns the main thread: the TUI), Ctrl-C, SIGTERM and
+    SIGHUP call ``callback`` on a thread of its own (a signal handler must not wait), once, so
+    the view can close its session and finish its recording; nothing is raised."""
+    called = threading.Event()
+
+    def handler(signum: int, frame: Any) -> None:
+        if not called.is_set():
+            called.set()
+            threading.Thread(target=callback, name="eg2scope stop", daemon=True).start()
+
+    with _handled_by(handler):
+        yield
+
+
+@contextmanager
+def _handled_by(handler: Callable[[int, Any], None]) -> Iterator[None]:
+    """Ctrl-C, SIGTERM and SIGHUP go to ``handler`` in the block (main thread only). Ctrl-C
+    and SIGHUP that the process was told to ignore (a background job of a script, ``nohup``)
+    stay ignored; SIGTERM, which nothing ignores on purpose, never is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    def handler(signum: int, frame: Any) -> None:
-        if finishing is None or not finishing():
-            raise KeyboardInterrupt
-
     wanted = [signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)]
     previous = {
         sig: signal.signal(sig, handler)
@@ -309,3 +323,19 @@ def signals_as_interrupt(finishing: Callable[[], bool] | None = None) -> Iterato
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
+
+
+@contextmanager
+def signals_as_interrupt(finishing: Callable[[], bool] | None = None) -> Iterator[None]:
+    """Ctrl-C, SIGTERM (kill, ``systemctl stop``) and SIGHUP (terminal closed) raise
+    KeyboardInterrupt, so a session ends cleanly and its recordings are finished; while
+    ``finishing()`` is true they are ignored (one is enough: a second must not cut the end of
+    a recording off). Only from the main thread; elsewhere nothing changes (``_handled_by``
+    says which signals)."""
+
+    def handler(signum: int, frame: Any) -> None:
+        if finishing is None or not finishing():
+            raise KeyboardInterrupt
+
+    with _handled_by(handler):
+        yield

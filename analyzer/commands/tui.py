@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import UsageError
 from ..listener import Listener
-from ..session import Session, SessionOptions
+from ..session import Session, SessionOptions, signals_call
 from ..sources.live import Tap
 from ..sources.source import LiveSource
 from .common import CaptureOptions, byte_protocol, exit_code, open_reader, speed_type
@@ -151,7 +151,8 @@ def run(args: argparse.Namespace) -> int:
         sessions: list[Session] = []
         plan.on_done.append(sessions.append)
         app = Eg2ScopeApp(plan)
-        app.run()
+        with signals_call(lambda: _stop_app(app)):  # as 'q' does, the recording finished
+            app.run()
         if app.session is not None and app.session not in sessions:
             app.session.stop()  # the app ended another way (an error): close the session
     if not sessions:
@@ -166,3 +167,13 @@ def run(args: argparse.Namespace) -> int:
     for err in session.source.errors:
         print(f"eg2scope: {args.file}: {err}", file=sys.stderr)
     return exit_code(session.counts, damaged=damaged, failed=bool(session.detached))
+
+
+def _stop_app(app: Any) -> None:
+    """Ctrl-C, SIGTERM or SIGHUP: end the session as an interrupt and quit as 'q' does."""
+    if app.session is not None:
+        app.session.interrupt()
+    try:
+        app.call_from_thread(app.action_quit)
+    except RuntimeError:  # the app is not running (yet, or any more)
+        app.exit(0)
