@@ -8,7 +8,6 @@ import os
 import sys
 import textwrap
 from collections.abc import Sequence
-from contextlib import nullcontext
 
 from . import __version__, native
 from .commands import SUBCOMMANDS
@@ -17,7 +16,6 @@ from .errors import (
     EXIT_STATUS_HELP,
     EXIT_USAGE,
     UsageError,
-    runs_until_stopped,
     stop_status,
 )
 from .session import signals_as_interrupt
@@ -52,12 +50,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    # a command that runs until stopped is stopped by SIGTERM and SIGHUP as by Ctrl-C, at any
-    # moment (its session finishes the recording; before the session began, it just ends); a
-    # file job's session handles them while it runs (its forked workers must not inherit them)
-    stopping = signals_as_interrupt() if runs_until_stopped(args) else nullcontext()
     try:
-        with stopping:
+        # SIGTERM and SIGHUP end a command as Ctrl-C does, at any moment: a session finishes
+        # its recording, a live command stopped before its session began just ends
+        with signals_as_interrupt():
             code = int(args.func(args) or 0)
         sys.stdout.flush()  # a pipe closed early shows here, not at interpreter exit
         return code

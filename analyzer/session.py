@@ -11,8 +11,9 @@ source (live taps behind a bounded queue, or a capture file, paced or not)
 all run this loop; they differ only in their source and listeners. Every call into a listener is
 guarded: a listener that raises is told (``on_error``), reported once to the others as an event,
 and detached; it never ends the session or loses a recording. Ctrl-C, SIGTERM and SIGHUP end a
-session cleanly: held bytes and requests are decided and every listener is closed (a second
-signal while it finishes is ignored: one is enough, and the recording must be finished).
+session cleanly, after the batch in hand: held bytes and requests are decided and every listener
+is closed (a signal while it finishes is ignored: one is enough, and the recording must be
+finished).
 
 How it ends decides what held data means. A capture that ran to its end decides its held bytes
 and waiting requests as damage (``truncated``, ``unanswered``). A capture that was stopped (a
@@ -112,7 +113,7 @@ class Session:
             deadline = time.monotonic() + self.options.duration
         # samples cost a copy of the state per reading: made only when someone reads them
         self.tracker.samples = any(x.wants_states for x in self.listeners)
-        with signals_as_interrupt(lambda: self._finishing), rare_gc():
+        with _handled_by(self._on_signal), rare_gc():
             try:
                 self.source.start()  # a live source that never opens raises SourceError
                 for batch in self.source.batches(self._stop):
@@ -139,6 +140,17 @@ class Session:
         main thread received): a capture cut short exits 130, a live one is stopped (0)."""
         self.counts.interrupted = True
         self._stop.set()
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        """Ctrl-C, SIGTERM, SIGHUP while the session runs on the main thread: the session
+        ends after the batch in hand (never in the middle of a listener's write, which would
+        leave a recording half-written); a second one, before the session got there, raises
+        KeyboardInterrupt where it is (a stuck output); while it finishes they are ignored."""
+        if self._finishing:
+            return
+        if self.counts.interrupted:
+            raise KeyboardInterrupt
+        self.interrupt()
 
     def _finish(self) -> None:
         try:
@@ -326,16 +338,14 @@ def _handled_by(handler: Callable[[int, Any], None]) -> Iterator[None]:
 
 
 @contextmanager
-def signals_as_interrupt(finishing: Callable[[], bool] | None = None) -> Iterator[None]:
+def signals_as_interrupt() -> Iterator[None]:
     """Ctrl-C, SIGTERM (kill, ``systemctl stop``) and SIGHUP (terminal closed) raise
-    KeyboardInterrupt, so a session ends cleanly and its recordings are finished; while
-    ``finishing()`` is true they are ignored (one is enough: a second must not cut the end of
-    a recording off). Only from the main thread; elsewhere nothing changes (``_handled_by``
-    says which signals)."""
+    KeyboardInterrupt, wherever the command is (a session running meanwhile handles them its
+    own way: ``Session._on_signal``). Only from the main thread; elsewhere nothing changes
+    (``_handled_by`` says which signals)."""
 
     def handler(signum: int, frame: Any) -> None:
-        if finishing is None or not finishing():
-            raise KeyboardInterrupt
+        raise KeyboardInterrupt
 
     with _handled_by(handler):
         yield

@@ -289,7 +289,9 @@ def finish_capture(
     (docs/contracts.md). ``opts``: the filter the records went through (none: all shown)."""
     for err in reader.errors:
         print(f"eg2scope: {path}: {err}", file=sys.stderr)
-    if not session.counts.interrupted and not reader.errors:  # damage says why itself
+    if session.counts.interrupted:
+        print("eg2scope: interrupted", file=sys.stderr)
+    elif not reader.errors:  # damage says why itself
         words = "" if opts is None else opts.filter_words()
         shown = session.counts.records
         if words:

@@ -10,7 +10,7 @@ import sys
 from typing import IO, Any
 
 from .. import native
-from ..errors import EXIT_OK, UsageError
+from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..listener import Listener, make_listener
 from ..outfile import OutputError, output_stream
 from ..session import Session
@@ -137,7 +137,9 @@ def run(args: argparse.Namespace) -> int:
     if nrun is not None:  # the native core decodes it (analyzer/native.py)
         with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
             code = native.decode(nrun, opts.path, out, args.output, opts.progress)
-        if code == EXIT_OK:  # not interrupted, not damaged (the damage says why itself)
+        if code == EXIT_INTERRUPTED:
+            print("eg2scope: interrupted", file=sys.stderr)
+        elif code == EXIT_OK:  # not damaged (the damage says why itself)
             report_empty(opts.path, nrun.size, nrun.records_written, opts.filter_words())
         return code
     with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:

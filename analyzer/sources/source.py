@@ -180,8 +180,12 @@ class CaptureSource(Source):
         return self.reader.errors
 
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
-        if self.speed is not None:  # paced: each item as it falls due
-            for x in paced(self.reader, self.speed):
+        if self.speed is not None:  # paced: each item as it falls due (a stop wakes it)
+
+            def nap(seconds: float) -> None:
+                stop.wait(seconds)
+
+            for x in paced(self.reader, self.speed, sleep=nap):
                 yield [x]
                 if stop.is_set():
                     return
