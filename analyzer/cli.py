@@ -13,7 +13,7 @@ from . import __version__, native
 from .commands import SUBCOMMANDS
 from .errors import (
     EXIT_ERROR,
-    EXIT_STATUS_HELP,
+    HELP_EXIT_STATUS,
     EXIT_USAGE,
     UsageError,
     stop_status,
@@ -31,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog=(
             "Run 'eg2scope COMMAND --help' for the options of one command.\n\n"
-            + textwrap.fill(EXIT_STATUS_HELP, width=88)
+            + textwrap.fill(HELP_EXIT_STATUS, width=88)
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -23,7 +23,7 @@ EXIT_USAGE: Final = 2
 EXIT_DAMAGED: Final = 3
 EXIT_INTERRUPTED: Final = 130
 
-EXIT_STATUS_HELP: Final = (
+HELP_EXIT_STATUS: Final = (
     "exit status: 0 done (a live capture stopped with Ctrl-C, SIGTERM or SIGHUP is done: "
     "its recording is finished); 1 error (a file that cannot be read or written, a live "
     "source that never opened, a device that failed); 2 usage error; 3 decoded as far as "
