@@ -13,8 +13,8 @@ from . import __version__, native
 from .commands import SUBCOMMANDS
 from .errors import (
     EXIT_ERROR,
-    HELP_EXIT_STATUS,
     EXIT_USAGE,
+    HELP_EXIT_STATUS,
     UsageError,
     stop_status,
 )

@@ -12,11 +12,16 @@ from ..errors import UsageError
 from ..listener import Listener
 from ..session import Session, SessionOptions, signals_call
 from ..sources.live import Tap
-from ..sources.source import LiveSource
 from .common import CaptureOptions, byte_protocol, exit_code, open_reader, speed_type
 from .demo import add_demo_arguments
 from .livesource import add_source_arguments, open_taps
-from .session import add_session_arguments, byte_times, recorder
+from .session import (
+    add_session_arguments,
+    byte_times,
+    check_recording_name,
+    open_source,
+    recorder,
+)
 
 if TYPE_CHECKING:
     from ..tui.app import SessionPlan
@@ -80,7 +85,15 @@ def live_plan(
     from ..tui.app import SessionPlan
 
     protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
-    record: Listener | None = recorder(args.output, taps) if args.output else None
+    if args.output:
+        check_recording_name(args.output)
+    # opened first: a device that does not open fails here (exit 1), before a recording is made
+    source = open_source(taps, args.queue_size, on_start)
+    try:
+        record: Listener | None = recorder(args.output, taps) if args.output else None
+    except BaseException:
+        source.stop()
+        raise
     options = SessionOptions(
         protocol=protocol,
         per_bus=per_bus,
@@ -89,9 +102,6 @@ def live_plan(
     )
 
     def build(feed: Listener) -> Session:
-        source = LiveSource(taps, args.queue_size)
-        if on_start is not None:
-            source.on_started = on_start
         listeners = [feed] if record is None else [record, feed]
         return Session(source, listeners, options)
 

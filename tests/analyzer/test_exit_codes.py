@@ -479,3 +479,16 @@ def test_a_bar_on_a_terminal_and_the_first_message_do_not_share_a_line(
     assert lines and not any("━" in line for line in lines)  # the bar is gone
     said = "".join(line.ljust(120) for line in lines).rstrip()
     assert said.startswith(f"eg2scope: {damaged}: line 400001: cannot parse: 'not a frame")
+
+
+def test_the_tui_on_a_missing_port_fails_at_once_and_touches_no_file(tmp_path: Path) -> None:
+    out = tmp_path / "run.mcap"
+    out.write_bytes(b"a recording the user keeps")
+    port = tmp_path / "ttyUSB0"
+    code, said = _on_a_terminal("tui", "--serial", str(port), "-o", str(out))
+    assert code == 1
+    assert said.strip() == (
+        f"eg2scope: error: cannot open {port}: no such port "
+        "(--wait waits for a device that is not plugged in yet)"
+    ).encode()
+    assert out.read_bytes() == b"a recording the user keeps"
