@@ -206,12 +206,19 @@ mod tests {
         live.feed_bus("can0", &frame(Some(1.0), READ_1120, &[8]), &mut out);
         live.feed_bus("can1", &frame(Some(1.0), READ_1120, &[8]), &mut out);
         live.cut_off("can1", &mut out);
-        assert_eq!(out.len(), 0, "can0's request waits first, and can1's behind it");
+        assert_eq!(
+            out.len(),
+            0,
+            "can0's request waits first, and can1's behind it"
+        );
         live.stop(&mut out);
         assert_eq!(out.len(), 2);
         for rec in &out {
             assert_eq!(rec.flags, vec![CUT_OFF]);
-            assert_eq!(rec.warnings, vec!["no response before the capture was stopped"]);
+            assert_eq!(
+                rec.warnings,
+                vec!["no response before the capture was stopped"]
+            );
         }
     }
 }
