@@ -7,6 +7,7 @@ import dataclasses
 import os
 import stat
 import sys
+import textwrap
 from typing import IO, Any
 
 from .. import native
@@ -26,11 +27,12 @@ from .common import (
 
 FORMATS = ("text", "jsonl", "csv", "parquet")
 BINARY = ("jsonl", "parquet")
-EXIT_CODES = (
+EXIT_CODES = textwrap.fill(
     "exit status: 0 decoded (an empty capture is said so on stderr); 1 error (a file that "
     "cannot be read or written); 2 usage error; 3 decoded as far as possible, but the input "
     "is damaged (see the messages on stderr); 130 interrupted (Ctrl-C, SIGTERM) before the "
-    "end of the input"
+    "end of the input",
+    width=88,
 )
 
 
