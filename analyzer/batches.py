@@ -44,7 +44,10 @@ class SessionDecoding(Protocol):
     def feed_items(self, items: list[Any]) -> list[Record]: ...
     def tick(self, now: float) -> list[Record]: ...
     def gap(self, bus: str) -> list[Record]: ...
+    def cut_off(self, bus: str) -> list[Record]: ...
     def finish(self) -> list[Record]: ...
+    def stop(self) -> list[Record]: ...
+    def set_protocol(self, bus: str, protocol: str) -> None: ...
 
 
 def native_session_available() -> bool:
@@ -83,7 +86,13 @@ class NativeCanDecoding:
         self.feed_items = core.feed
         self.tick = core.tick
         self.gap = core.gap
+        self.cut_off = core.cut_off
         self.finish = core.finish
+        self.stop = core.stop
+
+    def set_protocol(self, bus: str, protocol: str) -> None:
+        """Byte-stream protocols do not apply: this decoding is chosen for CAN-only input."""
+        raise ValueError(f"a CAN session has no byte streams to decode as {protocol} ({bus})")
 
 
 def column(items: Sequence[Any], name: str) -> list[Any]:

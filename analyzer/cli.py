@@ -6,11 +6,19 @@ import argparse
 import importlib
 import os
 import sys
+import textwrap
 from collections.abc import Sequence
 
 from . import __version__, native
 from .commands import SUBCOMMANDS
-from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError
+from .errors import (
+    EXIT_ERROR,
+    EXIT_USAGE,
+    HELP_EXIT_STATUS,
+    UsageError,
+    stop_status,
+)
+from .session import signals_as_interrupt
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -23,9 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog=(
             "Run 'eg2scope COMMAND --help' for the options of one command.\n\n"
-            "exit status: 0 done; 1 error (a file or device that cannot be read or written); "
-            "2 usage error; 3 decoded as far as possible, but the input is damaged; "
-            "130 interrupted (Ctrl-C)"
+            + textwrap.fill(HELP_EXIT_STATUS, width=88)
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -45,12 +51,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        code = int(args.func(args) or 0)
+        # SIGTERM and SIGHUP end a command as Ctrl-C does, at any moment: a session finishes
+        # its recording, a live command stopped before its session began just ends
+        with signals_as_interrupt():
+            code = int(args.func(args) or 0)
         sys.stdout.flush()  # a pipe closed early shows here, not at interpreter exit
         return code
     except KeyboardInterrupt:
-        print("eg2scope: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        code = stop_status(args)
+        print(f"eg2scope: {'interrupted' if code else 'stopped'}", file=sys.stderr)
+        return code
     except BrokenPipeError:
         # output piped into `head` and the like: stop quietly, as Unix tools do
         devnull = os.open(os.devnull, os.O_WRONLY)

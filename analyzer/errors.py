@@ -2,12 +2,19 @@
 
 - ``UsageError``: the command asks for something impossible (a negative count, an unknown
   interface, an output that is the input); nothing was read or written. Exit 2.
+- ``SourceError``: a live source never opened (no such port, no such CAN interface, a driver
+  missing); nothing was captured or written. Exit 1.
 - ``DamagedInput``: the input was decoded as far as it goes, but it is damaged. Exit 3.
 Any other ``OSError``/``ValueError`` is exit 1.
+
+A command that runs until it is stopped (a live capture, the simulator) ends cleanly, exit 0,
+on Ctrl-C, SIGTERM or SIGHUP, as candump and tcpdump do; a file job interrupted before the end
+of its input exits 130 (``stop_status``).
 """
 
 from __future__ import annotations
 
+import argparse
 from typing import Final
 
 EXIT_OK: Final = 0
@@ -16,10 +23,34 @@ EXIT_USAGE: Final = 2
 EXIT_DAMAGED: Final = 3
 EXIT_INTERRUPTED: Final = 130
 
+HELP_EXIT_STATUS: Final = (
+    "exit status: 0 done (a live capture stopped with Ctrl-C, SIGTERM or SIGHUP is done: "
+    "its recording is finished); 1 error (a file that cannot be read or written, a live "
+    "source that never opened, a device that failed); 2 usage error; 3 decoded as far as "
+    "possible, but the input is damaged; 130 a file job (decode, stats, batch, plot or tui "
+    "of a capture) interrupted before the end of its input"
+)
+
 
 class UsageError(ValueError):
     """The command line asks for something that cannot be done (exit 2)."""
 
 
+class SourceError(OSError):
+    """A live source never opened: the message names the device and says why (exit 1)."""
+
+
 class DamagedInput(Exception):
     """The input was decoded as far as possible but is damaged (exit 3)."""
+
+
+def runs_until_stopped(args: argparse.Namespace) -> bool:
+    """Whether the command runs until the user stops it: a live source, the demo or the
+    simulator (its parser sets ``until_stopped``), and not a capture file (``file``)."""
+    return bool(getattr(args, "until_stopped", False)) and not getattr(args, "file", None)
+
+
+def stop_status(args: argparse.Namespace) -> int:
+    """The exit status of a command ended by Ctrl-C, SIGTERM or SIGHUP: 0 for a command that
+    runs until stopped (stopping it is how it ends), 130 for a file job cut short."""
+    return EXIT_OK if runs_until_stopped(args) else EXIT_INTERRUPTED

@@ -219,7 +219,7 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
     """Write a native run's output into ``out`` (a binary stream, or a text stream whose buffer
     takes the bytes); report damage on stderr; the exit code, as commands.common.finish_capture
     gives it for the Python engine."""
-    from .session import _signals_as_interrupt
+    from .session import signals_as_interrupt
 
     binary: IO[bytes] = out
     if isinstance(out, io.TextIOBase):
@@ -228,7 +228,7 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
     fd = _fileno(binary)
     interrupted = False
     try:
-        with _signals_as_interrupt(), _progress(path, run, progress) as bar:
+        with signals_as_interrupt(), _progress(path, run, progress) as bar:
             try:
                 if isinstance(run, getattr(_native, "ArrowRun", ())):  # --format parquet
                     from .native_parquet import write

@@ -337,8 +337,10 @@ def decode_part(part: Part) -> PartResult:
 
 
 def _worker_init() -> None:
-    # Ctrl-C goes to the whole process group: the parent alone reports it, once
+    # Ctrl-C goes to the whole process group: the parent alone reports it, once; the parent's
+    # SIGTERM handler (an interrupt) is not the workers': Pool.terminate ends them with it
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     gc.disable()  # records hold no cycles (see session.rare_gc)
 
 

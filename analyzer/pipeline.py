@@ -39,7 +39,7 @@ class Decoding:
         (the parallel decoder's parts); ``byte_time_s``: seconds per byte of live serial buses,
         so frames that arrive in one read get their own times."""
         self.protocol = protocol
-        self.per_bus = per_bus or {}
+        self.per_bus = dict(per_bus or {})
         self.byte_time_s = byte_time_s or {}
         self.linter = TimingLinter()
         self.pairer = Pairer(positional=positional_seq)
@@ -100,18 +100,33 @@ class Decoding:
         return self._post(records) + self.pairer.tick(now)
 
     def finish(self) -> list[Record]:
-        records: list[Record] = []
-        for key in list(self._undetected):
-            dec = self._new_stream_decoder(key, self.protocol or self._choose(key))
-            records += self._replay(key, dec)
+        """The end of the input: held bytes are decided (a frame begun is ``truncated``) and
+        the requests still waiting are ``unanswered``."""
+        records = self._decide_undetected(None)
         for dec in self._streams.values():
             records += dec.finish()
         out = self._post(records)
         return out + self.pairer.flush()
 
+    def stop(self) -> list[Record]:
+        """The capture was stopped (a user's stop, the end of a duration) before its input
+        ended: as ``finish``, but a frame begun and the requests still waiting are ``cut_off``
+        by the stop, not errors of the bus."""
+        return self._cut_off(None)
+
+    def cut_off(self, bus: str) -> list[Record]:
+        """The capture of ``bus`` was stopped (its tap closed at the session's end): what it
+        holds is decided as by ``stop``, for that bus only."""
+        return self._cut_off(bus)
+
+    def set_protocol(self, bus: str, protocol: str) -> None:
+        """Fix the protocol of ``bus`` (its source named it after the protocol it detected),
+        before its first bytes are fed."""
+        self.per_bus[bus] = protocol
+
     def gap(self, bus: str) -> list[Record]:
-        """The bus's source went away (a port lost, a tap closed): the bytes held for a frame
-        that had begun will not be completed, so decide them now, before the gap is shown."""
+        """The bus's source went away (a port lost): the bytes held for a frame that had begun
+        will not be completed, so decide them now, before the gap is shown."""
         records: list[Record] = []
         for (name, _), dec in self._streams.items():
             if name == bus:
@@ -131,6 +146,22 @@ class Decoding:
         return ""
 
     # -- internals -------------------------------------------------------------------------
+
+    def _cut_off(self, bus: str | None) -> list[Record]:
+        records = self._decide_undetected(bus)
+        for (name, _), dec in self._streams.items():
+            if bus is None or name == bus:
+                records += dec.stop()
+        return self._post(records) + self.pairer.cut_off(bus)
+
+    def _decide_undetected(self, bus: str | None) -> list[Record]:
+        """The end of the streams of ``bus`` (None: of every bus) whose protocol was not
+        detected yet: decided from what they hold, their bytes decoded."""
+        records: list[Record] = []
+        for key in [k for k in self._undetected if bus is None or k[0] == bus]:
+            dec = self._new_stream_decoder(key, self.protocol or self._choose(key))
+            records += self._replay(key, dec)
+        return records
 
     def _decode_can(self, bus: str, frame: CanFrame) -> Record:
         dec = self._can.get(bus)

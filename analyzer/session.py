@@ -11,7 +11,15 @@ source (live taps behind a bounded queue, or a capture file, paced or not)
 all run this loop; they differ only in their source and listeners. Every call into a listener is
 guarded: a listener that raises is told (``on_error``), reported once to the others as an event,
 and detached; it never ends the session or loses a recording. Ctrl-C, SIGTERM and SIGHUP end a
-session cleanly: held bytes and requests are decided and every listener is closed.
+session cleanly, after the batch in hand: held bytes and requests are decided and every listener
+is closed (a signal while it finishes is ignored: one is enough, and the recording must be
+finished).
+
+How it ends decides what held data means. A capture that ran to its end decides its held bytes
+and waiting requests as damage (``truncated``, ``unanswered``). A capture that was stopped (a
+user's stop, the end of ``duration``, or a live source's taps closed) cuts them off:
+``cut_off`` records and requests, which are not errors of the bus. A source that was lost
+(``lost``) keeps the damage: the bus went away under them.
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ import gc
 import signal
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,11 +38,8 @@ from decoders.model import Record
 from .batches import error_count, session_engine
 from .listener import Listener
 from .model import ERROR, SourceEvent
-from .sources.live import Tap
+from .sources.live import CLOSED, LOST, Tap
 from .sources.source import Batch, LiveSource, Source
-
-# source events after which a bus's held bytes will not be completed
-GAP_EVENTS = frozenset({"lost", "closed"})
 
 
 @dataclass(frozen=True)
@@ -60,7 +65,8 @@ class SessionCounts:
     errors: int = 0
     samples: int = 0
     dropped: int = 0
-    interrupted: bool = False
+    interrupted: bool = False  # ended by Ctrl-C, SIGTERM or SIGHUP
+    live: bool = False  # the source was live: a user's stop is how it ends
 
     def line(self) -> str:
         return (
@@ -91,10 +97,13 @@ class Session:
             opts.per_bus,
             opts.byte_time_s,
         )
-        self.counts = SessionCounts()
+        self.counts = SessionCounts(live=source.live)
         self.detached: list[tuple[Listener, BaseException]] = []
         self._stop = threading.Event()
         self._closed = False
+        self._finishing = False  # in _finish: signals are ignored, the recording must end
+        self._cut_short = True  # the source did not run to its end (set when it did)
+        self._named = 0  # the source's bus protocols handed to the decoding
 
     # -- running ---------------------------------------------------------------------------
 
@@ -104,24 +113,44 @@ class Session:
             deadline = time.monotonic() + self.options.duration
         # samples cost a copy of the state per reading: made only when someone reads them
         self.tracker.samples = any(x.wants_states for x in self.listeners)
-        with _signals_as_interrupt(), rare_gc():
+        with _handled_by(self._on_signal), rare_gc():
             try:
-                self.source.start()
+                self.source.start()  # a live source that never opens raises SourceError
                 for batch in self.source.batches(self._stop):
                     self._step(batch)
                     if deadline is not None and time.monotonic() >= deadline:
                         break
                     if self._stop.is_set() or not self.listeners:
                         break  # stopped, or every output failed: nothing left to do
+                else:  # a live source never ends by itself: its end is a stop
+                    self._cut_short = self._stop.is_set() or self.source.live
             except KeyboardInterrupt:
                 self.counts.interrupted = True
             finally:
+                self._finishing = True
                 self._finish()
         return self.counts
 
     def stop(self) -> None:
         """End the session from another thread (the TUI's quit, a test)."""
         self._stop.set()
+
+    def interrupt(self) -> None:
+        """End the session as Ctrl-C ends it, from another thread (a signal that a view on the
+        main thread received): a capture cut short exits 130, a live one is stopped (0)."""
+        self.counts.interrupted = True
+        self._stop.set()
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        """Ctrl-C, SIGTERM, SIGHUP while the session runs on the main thread: the session
+        ends after the batch in hand (never in the middle of a listener's write, which would
+        leave a recording half-written); a second one, before the session got there, raises
+        KeyboardInterrupt where it is (a stuck output); while it finishes they are ignored."""
+        if self._finishing:
+            return
+        if self.counts.interrupted:
+            raise KeyboardInterrupt
+        self.interrupt()
 
     def _finish(self) -> None:
         try:
@@ -131,6 +160,7 @@ class Session:
             rest = []
         self._step(rest, final=True)
         self.counts.dropped = self.source.dropped
+        self._finishing = False
         for listener in list(self.listeners):
             self._call(listener, "close")
         self._closed = True
@@ -139,12 +169,20 @@ class Session:
 
     def _step(self, batch: Batch, final: bool = False) -> None:
         decoding = self.decoding
+        named = self.source.protocols
+        if len(named) > self._named:  # buses the source named after their protocol
+            for bus, protocol in list(named.items())[self._named :]:
+                decoding.set_protocol(bus, protocol)
+            self._named = len(named)
         items: list[Any] = []  # since the last event
         for x in batch:
             if isinstance(x, SourceEvent):
                 records = decoding.feed_items(items)
-                if x.kind in GAP_EVENTS:  # what was held for that bus ends before the gap
+                # what was held for that bus ends before the gap (damage) or the stop (cut off)
+                if x.kind == LOST:
                     records += decoding.gap(x.bus)
+                elif x.kind == CLOSED:
+                    records += decoding.cut_off(x.bus)
                 # keep events in order with the data around them
                 self._emit(items, records)
                 items = []
@@ -154,7 +192,7 @@ class Session:
         records = decoding.feed_items(items)
         now = time.time()
         if final:
-            records += decoding.finish()
+            records += decoding.stop() if self._cut_short else decoding.finish()
         elif self.source.live:
             records += decoding.tick(now)
         self._emit(items, records)
@@ -262,20 +300,52 @@ def rare_gc() -> Iterator[None]:
 
 
 @contextmanager
-def _signals_as_interrupt() -> Iterator[None]:
-    """SIGTERM (kill) and SIGHUP (terminal closed) end a session like Ctrl-C does, so
-    recordings are finished (only possible from the main thread)."""
+def signals_call(callback: Callable[[], None]) -> Iterator[None]:
+    """While the block runs (a view that owns the main thread: the TUI), Ctrl-C, SIGTERM and
+    SIGHUP call ``callback`` on a thread of its own (a signal handler must not wait), once, so
+    the view can close its session and finish its recording; nothing is raised."""
+    called = threading.Event()
+
+    def handler(signum: int, frame: Any) -> None:
+        if not called.is_set():
+            called.set()
+            threading.Thread(target=callback, name="eg2scope stop", daemon=True).start()
+
+    with _handled_by(handler):
+        yield
+
+
+@contextmanager
+def _handled_by(handler: Callable[[int, Any], None]) -> Iterator[None]:
+    """Ctrl-C, SIGTERM and SIGHUP go to ``handler`` in the block (main thread only). Ctrl-C
+    and SIGHUP that the process was told to ignore (a background job of a script, ``nohup``)
+    stay ignored; SIGTERM, which nothing ignores on purpose, never is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    def handler(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    wanted = [signal.SIGTERM, getattr(signal, "SIGHUP", None)]
-    previous = {sig: signal.signal(sig, handler) for sig in wanted if sig is not None}
+    wanted = [signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)]
+    previous = {
+        sig: signal.signal(sig, handler)
+        for sig in wanted
+        if sig is not None
+        and (sig == signal.SIGTERM or signal.getsignal(sig) is not signal.SIG_IGN)
+    }
     try:
         yield
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
+
+
+@contextmanager
+def signals_as_interrupt() -> Iterator[None]:
+    """Ctrl-C, SIGTERM (kill, ``systemctl stop``) and SIGHUP (terminal closed) raise
+    KeyboardInterrupt, wherever the command is (a session running meanwhile handles them its
+    own way: ``Session._on_signal``). Only from the main thread; elsewhere nothing changes
+    (``_handled_by`` says which signals)."""
+
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    with _handled_by(handler):
+        yield

@@ -18,6 +18,9 @@ MALFORMED: Final = "malformed"  # a frame whose payload does not fit its command
 CAN_ERROR_FRAME: Final = "can_error_frame"  # a CAN error frame seen on the bus
 DECODER_ERROR: Final = "decoder_error"  # a decoder bug caught on this frame
 
+# -- the capture's own end (not the bus: no error) -----------------------------------------
+CUT_OFF: Final = "cut_off"  # a frame begun, or a request waiting, when the capture was stopped
+
 # -- request/response pairing --------------------------------------------------------------
 UNANSWERED: Final = "unanswered"  # a request that never got its response
 ORPHAN_RESPONSE: Final = "orphan_response"  # a response with no request before it
@@ -56,6 +59,7 @@ DESCRIPTIONS: Final[dict[str, str]] = {
     MALFORMED: "payload does not fit the command's layout",
     CAN_ERROR_FRAME: "CAN error frame",
     DECODER_ERROR: "internal decoder error on this frame",
+    CUT_OFF: "cut off by the capture's stop (not a bus error)",
     UNANSWERED: "request never answered",
     ORPHAN_RESPONSE: "response without a request",
     RETRANSMISSION: "request sent again before the first was answered",

@@ -12,7 +12,9 @@ into a Record. This base does the rest the same way for every protocol:
   frame inside it (resynchronise one byte on, never a whole frame on). That frame is the valid
   one, or a candidate before it with a bad checksum of its own that ends in time: a damaged frame
   right after garbage keeps its own record;
-- at the end of the stream a frame that lacks bytes becomes a ``truncated`` record;
+- at the end of the stream a frame that lacks bytes becomes a ``truncated`` record (an error);
+  when the capture was stopped instead (``stop``: a user's Ctrl-C, the end of a ``--duration``),
+  a ``cut_off`` record, flagged ``cut_off`` with no error: the stop cut it, not the bus;
 - every input byte ends up in exactly one record.
 
 Times. Arrival times are kept per chunk. Without a byte time (a capture without a baud rate) a
@@ -29,10 +31,11 @@ from __future__ import annotations
 from collections import deque
 from typing import Final
 
+from .flags import CUT_OFF as CUT_OFF_FLAG
 from .flags import ESTIMATED_TIME
 from .flags import GARBAGE as GARBAGE_FLAG
 from .flags import TRUNCATED as TRUNCATED_FLAG
-from .model import GARBAGE, TRUNCATED, Chunk, Record
+from .model import CUT_OFF, GARBAGE, TRUNCATED, Chunk, Record
 
 NEED_MORE: Final = -0x7FFFFFFF  # frame_at: cannot decide before more bytes arrive
 MAX_GARBAGE: Final = 4096  # a garbage run is cut into records of at most this many bytes
@@ -68,6 +71,7 @@ class ByteStreamDecoder:
         self._resume = 0  # buffer index of the first byte not decided yet (after an open run)
         self._garbage_why: str = "no frame header"
         self.direction_hint: str | None = None  # direction of the newest chunk, if known
+        self._stopping = False  # deciding the held bytes because the capture was stopped
 
     # -- to be supplied by a protocol -------------------------------------------------------
 
@@ -115,6 +119,16 @@ class ByteStreamDecoder:
     def finish(self) -> list[Record]:
         """End of stream: decide every byte still held."""
         return self._scan(final=True)
+
+    def stop(self) -> list[Record]:
+        """The capture was stopped (a user's stop, the end of a duration), not the stream
+        ended: decide every byte held as ``finish`` does, but a frame begun becomes a
+        ``cut_off`` record (no error: the stop cut it, not the bus)."""
+        self._stopping = True
+        try:
+            return self._scan(final=True)
+        finally:
+            self._stopping = False
 
     def idle(self, now: float) -> list[Record]:
         """Live streams: when the line has been quiet for idle_s, decide the bytes held as if
@@ -337,6 +351,8 @@ class ByteStreamDecoder:
         return self._stamp(self.make_record(bytes(buf[pos : pos + length]), offset, None, valid))
 
     def _truncated(self, raw: bytes, pos: int) -> Record:
+        if self._stopping:
+            return self._cut_off_record(raw, pos)
         return self._stamp(
             Record(
                 t=None,
@@ -351,3 +367,26 @@ class ByteStreamDecoder:
                 flags=[TRUNCATED_FLAG],
             )
         )
+
+    def _cut_off_record(self, raw: bytes, pos: int) -> Record:
+        return self._stamp(
+            Record(
+                t=None,
+                bus=self.bus,
+                protocol=self.protocol,
+                kind=CUT_OFF,
+                length=len(raw),
+                raw=raw,
+                offset=self._base + pos,
+                warnings=[
+                    f"cut off by the stop: the capture was stopped {_bytes(len(raw))} into "
+                    "this frame"
+                ],
+                summary=f"frame cut off by the stop ({_bytes(len(raw))})",
+                flags=[CUT_OFF_FLAG],
+            )
+        )
+
+
+def _bytes(n: int) -> str:
+    return "1 byte" if n == 1 else f"{n} bytes"

@@ -20,6 +20,7 @@ FOREIGN_CAN = "can"
 FRAME = "frame"
 GARBAGE = "garbage"
 TRUNCATED = "truncated"
+CUT_OFF = "cut_off"  # the bytes of a frame begun when the capture was stopped: not damage
 
 # Record.direction
 REQUEST = "request"

@@ -13,6 +13,11 @@ answer to the first copy), and each later copy is flagged ``retransmission``. A 
 once an answer has come is not "unanswered": the exchange was answered. Once answered, the
 next identical request is a new one. Any other request on a one-question-at-a-time bus (serial,
 Modbus), or on the same CAN identifier, still means the waiting ones were not answered.
+
+The end. A capture that ends (``flush``) or a source that is lost (``gap``) leaves the waiting
+requests ``unanswered``. A capture that was stopped (``cut_off``: a user's stop, the end of a
+duration) cannot tell: their answers may have come just after it. They are flagged ``cut_off``
+("no response before the capture was stopped"), which is not a problem of the bus.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from collections.abc import Iterable
 from itertools import count
 from typing import Any
 
-from .flags import ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED
+from .flags import CUT_OFF, ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED
 from .model import EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 
 # Protocols on which a host has one question open at a time (RS232 question/answer, RS485
@@ -31,6 +36,7 @@ from .model import EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 ONE_OUTSTANDING = frozenset({EG2_SERIAL, MODBUS_RTU})
 
 RETRANSMITTED = "retransmission: the same request again before the first was answered"
+STOPPED_WAITING = "no response before the capture was stopped"
 # _expire takes from the heap every request due by now plus this, then applies the exact test
 # (now - t > limit): t + limit and now - t may round differently by a few ulps
 _DUE_SLACK_S = 1e-3
@@ -142,6 +148,14 @@ class Pairer:
             self._close(key, "no response before the source was lost")
         return self._release()
 
+    def cut_off(self, bus: str | None = None) -> list[Record]:
+        """The capture of ``bus`` (None: of every bus) was stopped: the requests waiting there
+        are flagged ``cut_off``, not ``unanswered`` (their answers may have come after the
+        stop), and released. With ``bus`` None nothing is held afterwards."""
+        for key in [k for k in self._pending if bus is None or k[0] == bus]:
+            self._close(key, STOPPED_WAITING, CUT_OFF)
+        return self._release()
+
     def waiting_before(self, position: int) -> bool:
         """A request from before ``position`` (a byte offset, or a CAN frame index) still waits
         for its answer: the parallel decoder's check that a part ends decided."""
@@ -219,16 +233,16 @@ class Pairer:
             heapq.heappop(due)
         self._next_expiry = due[0][0] if due else float("inf")
 
-    def _close(self, key: tuple[Any, ...], why: str) -> None:
+    def _close(self, key: tuple[Any, ...], why: str, code: str = UNANSWERED) -> None:
         """No more answers will come for the requests waiting on key."""
         for req in list(self._pending[key]):
-            self._drop(key, req, why)
+            self._drop(key, req, why, code)
 
-    def _drop(self, key: tuple[Any, ...], req: Record, why: str) -> None:
-        """A waiting request will not be answered: say so on it (unless an earlier copy of it
-        was answered) and stop waiting."""
+    def _drop(self, key: tuple[Any, ...], req: Record, why: str, code: str = UNANSWERED) -> None:
+        """A waiting request will not be answered (``code``: why, as a flag): say so on it
+        (unless an earlier copy of it was answered) and stop waiting."""
         if key not in self._answered:
-            _flag(req, UNANSWERED, why)
+            _flag(req, code, why)
         requests = self._pending[key]
         # by identity, not ==: the copies of a request are equal records
         del requests[next(i for i, r in enumerate(requests) if r is req)]

@@ -5,9 +5,17 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..sources.naming import UNNAMED
 from ..sources.serial_tap import SerialBridge
-from .livesource import add_line_arguments, line_states, serial_bus_name
-from .session import add_session_arguments, run_session
+from .livesource import (
+    add_line_arguments,
+    add_naming_arguments,
+    add_wait_argument,
+    line_states,
+    named_serial_tap,
+    serial_bus_name,
+)
+from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -18,20 +26,15 @@ def add_subparser(sub: Any) -> None:
             "An inline tap for lines a passive tap cannot reach: connect the host to "
             "HOST_PORT and the gripper to DEVICE_PORT; every byte is relayed unchanged, as soon "
             "as it arrives, and decoded with its direction known. Unlike the other taps this "
-            "one is in the line (not passive). Ctrl-C ends."
+            "one is in the line (not passive). Ctrl-C or SIGTERM ends it."
         ),
+        epilog=LIVE_EXIT_STATUS,
     )
     parser.add_argument("host_port", metavar="HOST_PORT", help="port the host controller is on")
     parser.add_argument("device_port", metavar="DEVICE_PORT", help="port the gripper is on")
     parser.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    parser.add_argument(
-        "--protocol",
-        "-p",
-        default="auto",
-        metavar="NAME",
-        help="serial, modbus or auto (default: detected)",
-    )
-    parser.add_argument("--bus", metavar="NAME", help="bus name in records")
+    add_naming_arguments(parser)
+    add_wait_argument(parser)
     parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
     add_line_arguments(parser)
     add_session_arguments(parser, record_required=False)
@@ -40,7 +43,14 @@ def add_subparser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     rts, dtr = line_states(args)
+    name = serial_bus_name(args)
     tap = SerialBridge(
-        serial_bus_name(args), args.host_port, args.device_port, args.baud, rts=rts, dtr=dtr
+        name or UNNAMED,
+        args.host_port,
+        args.device_port,
+        args.baud,
+        rts=rts,
+        dtr=dtr,
+        wait=args.wait,
     )
-    return run_session(args, [tap], show=args.format)
+    return run_session(args, [named_serial_tap(tap, name)], show=args.format)

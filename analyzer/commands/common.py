@@ -12,7 +12,7 @@ from typing import Any
 from decoders.model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Record
 from decoders.registry import resolve_protocol, short_name
 
-from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
+from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..listener import Listener
 from ..model import SourceEvent
 from ..session import Session, SessionCounts, SessionOptions
@@ -153,6 +153,12 @@ class CaptureOptions:
             engine=getattr(args, "engine", "auto"),
         )
 
+    def filter_words(self) -> str:
+        """The record filter as the command line said it ("--device 2 --errors-only"); ''
+        when there is none."""
+        words = [] if self.device is None else [f"--device {self.device}"]
+        return " ".join(words + (["--errors-only"] if self.errors_only else []))
+
     def record_filter(self) -> Callable[[Record], bool] | None:
         device, errors_only = self.device, self.errors_only
         if device is None and not errors_only:
@@ -197,6 +203,7 @@ class FilteredListener(Listener):
     def __init__(self, inner: Listener, keep: Callable[[Record], bool]) -> None:
         self.inner = inner
         self.keep = keep
+        self.kept = 0  # records passed on
         self.wants_states = inner.wants_states
         self.wants_raw = inner.wants_raw
         self.label = getattr(inner, "label", type(inner).__name__)
@@ -205,6 +212,7 @@ class FilteredListener(Listener):
         keep = self.keep
         kept = [r for r in records if keep(r)]
         if kept:
+            self.kept += len(kept)
             self.inner.on_records(kept)
 
     def on_states(self, samples: Sequence[Any]) -> None:
@@ -283,16 +291,44 @@ def run_capture(
     return session, reader
 
 
-def finish_capture(path: str, session: Session, reader: CaptureReader) -> int:
-    """Report damage and failed outputs on stderr; the exit code (docs/contracts.md)."""
+def finish_capture(
+    path: str, session: Session, reader: CaptureReader, opts: CaptureOptions | None = None
+) -> int:
+    """Report damage, an empty capture and failed outputs on stderr; the exit code
+    (docs/contracts.md). ``opts``: the filter the records went through (none: all shown)."""
     for err in reader.errors:
         print(f"eg2scope: {path}: {err}", file=sys.stderr)
+    if session.counts.interrupted:
+        print("eg2scope: interrupted", file=sys.stderr)
+    elif not reader.errors:  # damage says why itself
+        words = "" if opts is None else opts.filter_words()
+        shown = session.counts.records
+        if words:
+            shown = sum(x.kept for x in session.listeners if isinstance(x, FilteredListener))
+        report_empty(path, reader.size, shown, words)
     return exit_code(session.counts, damaged=bool(reader.errors), failed=bool(session.detached))
 
 
+def report_empty(path: str, size: int, records: int, filter_words: str = "") -> None:
+    """Say on stderr that a capture held nothing to show (``records``: those shown, after
+    the filter ``filter_words`` names), so silence is never the answer: an empty file, a
+    capture without a frame, a filter that matched none."""
+    if records:
+        return
+    if size == 0:
+        why = "empty file: no records"
+    elif filter_words:
+        why = f"no records matched {filter_words}"
+    else:
+        why = "no frames in this capture: no records"
+    print(f"eg2scope: {path}: {why}", file=sys.stderr)
+
+
 def exit_code(counts: SessionCounts, damaged: bool = False, failed: bool = False) -> int:
+    """A session's exit status (docs/contracts.md): a failed output or device is an error; a
+    live session stopped by the user ended as it should (0), a capture cut short is 130."""
     if failed:
-        return 1
-    if counts.interrupted:
+        return EXIT_ERROR
+    if counts.interrupted and not counts.live:
         return EXIT_INTERRUPTED
     return EXIT_DAMAGED if damaged else EXIT_OK

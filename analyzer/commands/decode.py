@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import os
+import stat
 import sys
+import textwrap
 from typing import IO, Any
 
 from decoders.registry import PROTOCOL_WORDS, short_name, valid_frames
 
 from .. import native
-from ..errors import UsageError
+from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..listener import Listener, make_listener
 from ..outfile import OutputError, output_stream
 from ..pipeline import DETECT_BYTES
@@ -22,15 +26,18 @@ from .common import (
     finish_capture,
     non_negative_int,
     open_reader,
+    report_empty,
     run_capture,
 )
 
 FORMATS = ("text", "jsonl", "csv", "parquet")
 BINARY = ("jsonl", "parquet")
-EXIT_CODES = (
-    "exit status: 0 decoded; 1 error (a file that cannot be read or written); 2 usage error; "
-    "3 decoded as far as possible, but the input is damaged (see the messages on stderr); "
-    "130 interrupted"
+EXIT_CODES = textwrap.fill(
+    "exit status: 0 decoded (an empty capture is said so on stderr); 1 error (a file that "
+    "cannot be read or written); 2 usage error; 3 decoded as far as possible, but the input "
+    "is damaged (see the messages on stderr); 130 interrupted (Ctrl-C, SIGTERM) before the "
+    "end of the input",
+    width=88,
 )
 
 
@@ -124,9 +131,14 @@ def text_colour(args: argparse.Namespace) -> bool | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.format == "parquet" and args.output in (None, "-") and sys.stdout.isatty():
-        raise UsageError("--format parquet writes a binary file: give -o FILE.parquet")
+    to_terminal = to_a_terminal(args.output)
+    if args.format == "parquet" and to_terminal:
+        raise UsageError(
+            "--format parquet writes a binary file, not to a terminal: give -o FILE.parquet"
+        )
     opts = CaptureOptions.from_args(args)
+    if to_terminal:  # the records scrolling by show the progress; a bar would cut into them
+        opts = dataclasses.replace(opts, progress=False)
     reader = open_reader(opts)  # opened first: a missing input must not touch the output
     hint = protocol_hint(opts, reader)
     if hint:
@@ -134,7 +146,12 @@ def run(args: argparse.Namespace) -> int:
     nrun = native.open_for(args, opts, reader, text_colour(args))
     if nrun is not None:  # the native core decodes it (analyzer/native.py)
         with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
-            return native.decode(nrun, opts.path, out, args.output, opts.progress)
+            code = native.decode(nrun, opts.path, out, args.output, opts.progress)
+        if code == EXIT_INTERRUPTED:
+            print("eg2scope: interrupted", file=sys.stderr)
+        elif code == EXIT_OK:  # not damaged (the damage says why itself)
+            report_empty(opts.path, nrun.size, nrun.records_written, opts.filter_words())
+        return code
     with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
         from ..parallel import JoinError, decode_in_parallel, resumed
 
@@ -150,7 +167,24 @@ def run(args: argparse.Namespace) -> int:
             listener = resumed(listener, resume)
         session, reader = run_capture(opts, [listener], reader)
         raise_output_failure(session, args.output)
-    return finish_capture(opts.path, session, reader)
+    return finish_capture(opts.path, session, reader, opts)
+
+
+def to_a_terminal(output: str | None) -> bool:
+    """Whether the output goes to a terminal: stdout (no ``-o``, or ``-o -``) that is one, or
+    ``-o`` naming one (``/dev/tty``, ``/dev/stdout`` on a terminal)."""
+    if output in (None, "-"):
+        return sys.stdout.isatty()
+    try:
+        if not stat.S_ISCHR(os.stat(output).st_mode):
+            return False
+        fd = os.open(output, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError:
+        return False  # not there yet (a new file), or not ours to open: not a terminal
+    try:
+        return os.isatty(fd)
+    finally:
+        os.close(fd)
 
 
 def protocol_hint(opts: CaptureOptions, reader: CaptureReader) -> str:

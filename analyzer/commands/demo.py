@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from typing import Any
 
 from ..listener import Listener
+from ..session import Session
 from ..sim.rig import BUSES, DemoRig
 from .common import probability
-from .session import add_session_arguments, run_session
+from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -21,9 +23,9 @@ def add_subparser(sub: Any) -> None:
             "Modbus RTU RS485 line (virtual ptys) and a virtual CAN bus, with a host program on "
             "each running pick-and-place cycles, and watch them through eg2scope's real passive "
             "taps, decoded live. A little line noise is injected so checksum errors and garbage "
-            "show up. Ctrl-C ends."
+            "show up. Ctrl-C or SIGTERM ends it."
         ),
-        epilog="example: eg2scope demo --duration 10 -o demo.mcap",
+        epilog="example: eg2scope demo --duration 10 -o demo.mcap\n\n" + LIVE_EXIT_STATUS,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_demo_arguments(parser)
@@ -62,9 +64,13 @@ def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_demo(
-    args: argparse.Namespace, show: str | None, extra: list[Listener] | None = None
+    args: argparse.Namespace,
+    show: str | None,
+    extra: list[Listener] | None = None,
+    on_done: Callable[[Session], None] | None = None,
 ) -> int:
-    """The simulated grippers through one live session (``extra``: more listeners)."""
+    """The simulated grippers through one live session (``extra``: more listeners;
+    ``on_done``: handed the finished session)."""
     with DemoRig(args.buses, noise=args.noise) as rig:
         print(
             f"eg2scope {args.command}: simulated grippers 1 and 2 on "
@@ -79,6 +85,7 @@ def run_demo(
             per_bus=rig.protocols,
             on_start=rig.run_hosts,
             extra=extra,
+            on_done=on_done,
         )
 
 

@@ -7,7 +7,7 @@ from typing import Any
 
 from ..rerun_target import add_rerun_argument
 from .livesource import add_source_arguments, open_taps
-from .session import add_session_arguments, run_session
+from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -17,8 +17,9 @@ def add_subparser(sub: Any) -> None:
         description=(
             "Watch a live bus passively and print every frame decoded, as it happens. The "
             "CAN tap requests listen-only where the interface allows and never sends; serial "
-            "taps never write to the ports they watch. A port or interface that goes away is "
-            "reported and reopened when it comes back; the gap is marked. Ctrl-C ends."
+            "taps never write to the ports they watch. A port or interface that does not open "
+            "fails at once (--wait waits for it); one that goes away is reported and reopened "
+            "when it comes back, and the gap is marked. Ctrl-C or SIGTERM ends it."
         ),
         epilog=(
             "examples:\n"
@@ -26,7 +27,8 @@ def add_subparser(sub: Any) -> None:
             "  eg2scope live --serial /dev/ttyUSB0 --protocol modbus\n"
             "  eg2scope live --serial /dev/ttyUSB0 --serial /dev/ttyUSB1   # one adapter per "
             "RS232 wire\n"
-            "  eg2scope live -i pcan -c PCAN_USBBUS1 -o run.mcap            # and record"
+            "  eg2scope live -i pcan -c PCAN_USBBUS1 -o run.mcap            # and record\n\n"
+            + LIVE_EXIT_STATUS
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -1,11 +1,14 @@
-"""Source options shared by the live commands (live, record): CAN, serial, pair, bridge.
+"""Source options shared by the live commands (live, record, plot, tui; bridge takes the
+serial ones): CAN, serial, pair, bridge, and ``--wait``.
 
 CAN options are python-can's own (``can.cli.add_bus_arguments``: ``-i/-c/-b``, ``--fd``,
 ``--data-bitrate``, ``--timing``, ``--bus-kwargs KEY=VALUE ...``), completed from python-can's
 configuration (``CAN_INTERFACE``/``CAN_CHANNEL``, ``~/can.ini``) as ``can.logger`` does;
 serial ports are pyserial names or URLs. Several sources may be given at once (a CAN bus and a
 serial line, say). Options that can never work (an unknown interface, an impossible baud rate,
-a malformed channel) raise ``UsageError`` here, before anything is opened.
+a malformed channel, an unknown protocol) are usage errors here, before anything is opened. A
+device that does not open fails the command at once (``SourceError``, exit 1), unless
+``--wait`` asks to wait for it.
 """
 
 from __future__ import annotations
@@ -16,10 +19,12 @@ from typing import Any
 import can
 import can.cli
 
+from decoders.model import EG2_CAN
 from decoders.registry import resolve_protocol
 
 from ..errors import UsageError
 from ..sources.live import Tap
+from ..sources.naming import BUS_BY_PROTOCOL, UNNAMED
 
 # the namespace keys add_bus_arguments fills (create_bus_from_namespace reads the same)
 CAN_KEYS = ("interface", "channel", "bitrate", "fd", "data_bitrate", "timing")
@@ -52,18 +57,52 @@ def add_source_arguments(parser: argparse.ArgumentParser, bridge: bool = True) -
             help="inline tap: relay between the host's port and the gripper's "
             "port and decode both directions (not passive: it is in the line)",
         )
+    add_naming_arguments(parser)
+    add_wait_argument(parser)
+
+
+def serial_protocol_type(text: str) -> str | None:
+    """argparse type: a serial line's protocol or "auto" (None: detected); CAN is no choice
+    for a serial line."""
+    if text.lower() == "auto":
+        return None
+    try:
+        protocol = resolve_protocol(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if protocol == EG2_CAN:
+        raise argparse.ArgumentTypeError(
+            "--protocol is a serial line's: serial, modbus or auto (a CAN source is always CAN)"
+        )
+    return protocol
+
+
+def add_naming_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--protocol`` and ``--bus`` of a serial source."""
     parser.add_argument(
         "--protocol",
         "-p",
-        default="auto",
+        type=serial_protocol_type,
+        default=None,
         metavar="NAME",
-        help="serial protocol: serial, modbus or auto (default: detected)",
+        help="serial protocol: serial (the regular serial protocol), modbus (Modbus RTU) or "
+        "auto (default: detected from the bytes)",
     )
     parser.add_argument(
         "--bus",
         metavar="NAME",
-        help="bus name in records (default: the CAN "
-        "channel, 'rs232'/'rs485' style names for serial)",
+        help="bus name in records (default: the CAN channel; for serial, by protocol: rs232 "
+        "for the regular serial protocol, rs485 for Modbus RTU, named when it is detected)",
+    )
+
+
+def add_wait_argument(parser: Any) -> None:
+    parser.add_argument(
+        "--wait",
+        action="store_true",
+        help="wait for a port or CAN interface that is not there yet (an adapter not "
+        "plugged in), retrying with back-off; without it a source that does not open "
+        "fails at once (exit 1)",
     )
 
 
@@ -107,11 +146,18 @@ def can_bus_config(args: argparse.Namespace) -> dict[str, Any] | None:
     return config
 
 
-def serial_bus_name(args: argparse.Namespace) -> str:
+def serial_bus_name(args: argparse.Namespace) -> str | None:
+    """``--bus``, else the name of the protocol given; None: named by the protocol detected
+    (sources/naming.py)."""
     if args.bus:
         return str(args.bus)
-    protocol = None if args.protocol == "auto" else resolve_protocol(args.protocol)
-    return {"modbus-rtu": "rs485", "eg2-serial": "rs232"}.get(protocol or "", "serial")
+    return BUS_BY_PROTOCOL.get(args.protocol)
+
+
+def named_serial_tap(tap: Tap, name: str | None) -> Tap:
+    """``tap``, marked to be named by its protocol when ``name`` is None."""
+    tap.named_by_protocol = name is None
+    return tap
 
 
 def open_taps(args: argparse.Namespace) -> list[Tap]:
@@ -121,17 +167,23 @@ def open_taps(args: argparse.Namespace) -> list[Tap]:
     from ..sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
 
     taps: list[Tap] = []
+    wait = bool(getattr(args, "wait", False))
     config = can_bus_config(args)
     if config is not None:
         interface, channel = config.pop("interface"), config.pop("channel")
         bitrate = config.pop("bitrate", None)
-        taps.append(CanTap(args.bus or str(channel), interface, channel, bitrate, **config))
+        can_bus = args.bus or str(channel)
+        taps.append(CanTap(can_bus, interface, channel, bitrate, wait=wait, **config))
     ports = list(args.serial)
     rts, dtr = line_states(args)
+    name = serial_bus_name(args)
+    bus = name or UNNAMED
     if len(ports) == 1:
-        taps.append(SerialTap(serial_bus_name(args), ports[0], args.baud, rts=rts, dtr=dtr))
+        tap: Tap = SerialTap(bus, ports[0], args.baud, rts=rts, dtr=dtr, wait=wait)
+        taps.append(named_serial_tap(tap, name))
     elif len(ports) == 2:
-        taps.append(SerialPairTap(serial_bus_name(args), ports, args.baud, rts=rts, dtr=dtr))
+        tap = SerialPairTap(bus, ports, args.baud, rts=rts, dtr=dtr, wait=wait)
+        taps.append(named_serial_tap(tap, name))
     elif len(ports) > 2:
         raise UsageError(
             "--serial takes one port (RS485, or both directions on one wire) or "
@@ -139,8 +191,8 @@ def open_taps(args: argparse.Namespace) -> list[Tap]:
         )
     if getattr(args, "bridge", None):
         host, device = args.bridge
-        bus = serial_bus_name(args)
-        taps.append(SerialBridge(bus, host, device, args.baud, rts=rts, dtr=dtr))
+        tap = SerialBridge(bus, host, device, args.baud, rts=rts, dtr=dtr, wait=wait)
+        taps.append(named_serial_tap(tap, name))
     if not taps:
         raise UsageError(
             "no source given: use -i/-c for CAN, --serial PORT, or --bridge "

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from typing import Any
 
 from ..batches import ENGINES, session_engine
@@ -18,6 +17,7 @@ from ..rerun_target import (
     default_target,
     save_target,
 )
+from ..session import Session
 from .common import (
     CaptureOptions,
     finish_capture,
@@ -192,9 +192,9 @@ def plot_live(args: argparse.Namespace) -> int:
         return _plot_demo(args)
     taps = open_taps(args)  # usage errors before a viewer opens
     listener = RerunListener(chosen_target(args, args.output), live=True)
-    start = time.monotonic()
-    code = run_session(args, taps, show=None, extra=[listener])
-    return _finish_live(args, listener, code, time.monotonic() - start)
+    ended: list[Session] = []
+    code = run_session(args, taps, show=None, extra=[listener], on_done=ended.append)
+    return _finish_live(listener, code, ended)
 
 
 def _plot_demo(args: argparse.Namespace) -> int:
@@ -202,15 +202,15 @@ def _plot_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     listener = RerunListener(chosen_target(args, args.output), live=True)
-    start = time.monotonic()
-    code = run_demo(args, show=None, extra=[listener])
-    return _finish_live(args, listener, code, time.monotonic() - start)
+    ended: list[Session] = []
+    code = run_demo(args, show=None, extra=[listener], on_done=ended.append)
+    return _finish_live(listener, code, ended)
 
 
-def _finish_live(args: argparse.Namespace, listener: Any, code: int, ran_s: float) -> int:
-    """A served web viewer stays up after a session that ran its course (``--duration``),
-    until Ctrl-C; a session ended by Ctrl-C or SIGTERM ends it at once."""
-    if args.duration is not None and ran_s >= args.duration and code != EXIT_INTERRUPTED:
+def _finish_live(listener: Any, code: int, ended: list[Session]) -> int:
+    """A served web viewer stays up after a session that ran its course (--duration), not
+    after the user stopped it."""
+    if not any(session.counts.interrupted for session in ended):
         listener.output.hold()
     listener.output.stop_server()
     return code

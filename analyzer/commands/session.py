@@ -1,10 +1,13 @@
-"""Running a live session from the command line (live, record, bridge, demo): the outputs, a
-status line, source events as they happen, a clean ending."""
+"""Running a live session from the command line (live, record, bridge, demo, live plot): the
+source opened first (a device that does not open fails at once, before any output is made), the
+outputs, a status line, source events as they happen, and a clean ending: a user's stop (Ctrl-C,
+SIGTERM, SIGHUP) or the end of ``--duration`` is how a live capture ends, exit 0."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 import time
 from collections.abc import Callable, Sequence
 from typing import IO, Any
@@ -18,11 +21,22 @@ from ..model import SourceEvent
 from ..session import Session, SessionOptions
 from ..sinks.text import format_event, use_colour
 from ..sources.live import Tap
+from ..sources.naming import BUS_BY_PROTOCOL
 from ..sources.source import LiveSource
 from .common import exit_code, positive_float, positive_int
 
+LIVE_EXIT_STATUS = textwrap.fill(
+    "exit status: 0 stopped (Ctrl-C, SIGTERM or SIGHUP, or the end of --duration: the "
+    "recording is finished); 1 error (a source that does not open, a device that failed, an "
+    "output that cannot be written); 2 usage error",
+    width=88,
+)
+
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
+    """The options of a live session (its outputs and its end); a live command runs until it
+    is stopped, and a stop is a clean end (``errors.runs_until_stopped``)."""
+    parser.set_defaults(until_stopped=True)
     parser.add_argument(
         "--output",
         "-o",
@@ -91,7 +105,7 @@ def metadata(taps: list[Tap]) -> dict[str, Any]:
         "version": __version__,
         "command": " ".join(sys.argv),
         "sources": [
-            {"bus": t.bus, "type": type(t).__name__, "passive": t.passive, **t.settings}
+            {**_bus_metadata(t), "type": type(t).__name__, "passive": t.passive, **t.settings}
             for t in taps
         ],
         "passive": (
@@ -104,6 +118,14 @@ def metadata(taps: list[Tap]) -> dict[str, Any]:
     }
 
 
+def _bus_metadata(tap: Tap) -> dict[str, Any]:
+    """A source's bus in the metadata; one named by its protocol later has none yet."""
+    if not tap.named_by_protocol:
+        return {"bus": tap.bus}
+    names = ", ".join(f"{name} ({protocol})" for protocol, name in BUS_BY_PROTOCOL.items())
+    return {"bus": None, "bus_named_by_protocol": names}
+
+
 def byte_times(taps: list[Tap]) -> dict[str, float]:
     """Seconds per byte of each serial bus (10 bits per byte: start, 8 data, stop)."""
     out: dict[str, float] = {}
@@ -114,10 +136,25 @@ def byte_times(taps: list[Tap]) -> dict[str, float]:
     return out
 
 
-def recorder(path: str, taps: list[Tap]) -> Listener:
+def check_recording_name(path: str) -> None:
     if not path.lower().endswith(".mcap"):
         raise UsageError(f"recordings are MCAP files: name the output *.mcap, not {path}")
+
+
+def recorder(path: str, taps: list[Tap]) -> Listener:
+    check_recording_name(path)
     return make_listener("mcap", path, metadata=metadata(taps))
+
+
+def open_source(
+    taps: list[Tap], queue_size: int, on_start: Callable[[], None] | None = None
+) -> LiveSource:
+    """The taps as a started source: every device opened (or waited for, ``--wait``);
+    ``SourceError`` naming each device that did not open, and why."""
+    source = LiveSource(taps, queue_size)
+    source.on_started = on_start
+    source.start()
+    return source
 
 
 def run_session(
@@ -127,15 +164,53 @@ def run_session(
     per_bus: dict[str, str] | None = None,
     on_start: Callable[[], None] | None = None,
     extra: list[Listener] | None = None,
+    on_done: Callable[[Session], None] | None = None,
 ) -> int:
     """Watch ``taps`` with the outputs the options ask for: ``show`` "text" or "jsonl" on
-    stdout (None: a status line and events on stderr), and an MCAP recording with ``-o``."""
+    stdout (None: a status line and events on stderr), and an MCAP recording with ``-o``.
+    The taps are opened first: a device that does not open fails the command before a file is
+    made. ``on_done`` is handed the finished session."""
     from decoders.registry import resolve_protocol
 
     try:
         protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if args.output:
+        check_recording_name(args.output)
+    options = SessionOptions(
+        protocol=protocol,
+        per_bus=per_bus or {},
+        byte_time_s=byte_times(taps),
+        duration=args.duration,
+    )
+    source = open_source(taps, args.queue_size, on_start)
+    try:  # until the session runs, the source is closed here if anything fails
+        session = Session(source, _outputs(args, taps, show, extra), options)
+    except BaseException:
+        source.stop()
+        raise
+    if show is None:
+        what = f"recording {args.output}" if args.output else "watching"
+        session.listeners.append(StatusLine(session, what, taps, sys.stderr))
+    counts = session.run()
+    if on_done is not None:
+        on_done(session)
+    where = f" into {args.output}" if args.output else ""
+    stopped = "stopped: " if counts.interrupted else ""
+    print(f"eg2scope: {stopped}{counts.line()}{where}", file=sys.stderr)
+    for listener, failure in session.detached:
+        label = getattr(listener, "label", type(listener).__name__)
+        print(f"eg2scope: error: {label} failed: {failure}", file=sys.stderr)
+    failed_taps = [tap for tap in taps if tap.failed]
+    for tap in failed_taps:
+        print(f"eg2scope: error: {tap.bus} failed: {tap.failed}", file=sys.stderr)
+    return exit_code(counts, failed=bool(session.detached or failed_taps))
+
+
+def _outputs(
+    args: argparse.Namespace, taps: list[Tap], show: str | None, extra: list[Listener] | None
+) -> list[Listener]:
     listeners: list[Listener] = list(extra or [])
     if show == "text":  # live: time counts from the session's start
         listeners.append(make_listener("text", sys.stdout, t0=time.time()))
@@ -148,23 +223,4 @@ def run_session(
     rerun = rerun_listener(args, source=args.output)
     if rerun is not None:
         listeners.append(rerun)
-    source = LiveSource(taps, args.queue_size)
-    options = SessionOptions(
-        protocol=protocol,
-        per_bus=per_bus or {},
-        byte_time_s=byte_times(taps),
-        duration=args.duration,
-    )
-    session = Session(source, listeners, options)
-    if show is None:
-        what = f"recording {args.output}" if args.output else "watching"
-        session.listeners.append(StatusLine(session, what, taps, sys.stderr))
-    if on_start is not None:
-        source.on_started = on_start
-    counts = session.run()
-    where = f" into {args.output}" if args.output else ""
-    print(f"eg2scope: {counts.line()}{where}", file=sys.stderr)
-    for listener, failure in session.detached:
-        label = getattr(listener, "label", type(listener).__name__)
-        print(f"eg2scope: error: {label} failed: {failure}", file=sys.stderr)
-    return exit_code(counts, failed=bool(session.detached))
+    return listeners

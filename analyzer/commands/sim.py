@@ -13,6 +13,7 @@ import threading
 import time
 from typing import Any
 
+from ..errors import UsageError
 from ..sim.endpoints import CanGripperServer, ModbusGripperServer, SerialGripperServer
 from ..sim.gripper import GripperModel
 from ..sim.host import HostQuirks, run_host_cycle
@@ -119,15 +120,18 @@ def add_subparser(sub: Any) -> None:
         default=None,
         help="bit rate, for interfaces that set it (the gripper: 500000)",
     )
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=run, until_stopped=True)  # a server: Ctrl-C is how it ends
 
 
 def _object_width(text: str) -> float | None:
     if text.lower() in ("none", "no", "-"):
         return None
-    width = float(text)
+    try:
+        width = float(text)
+    except ValueError:
+        width = -1.0
     if not 0 <= width <= 1000:
-        raise ValueError(f"--object-width must be 0-1000 or 'none', not {text}")
+        raise UsageError(f"--object-width must be 0-1000 or 'none', not {text}")
     return width
 
 
@@ -136,9 +140,9 @@ def run(args: argparse.Namespace) -> int:
     limit = 16382 if args.protocol == "can" else 254
     for device in ids:
         if not 1 <= device <= limit:
-            raise ValueError(f"--id must be 1-{limit}, not {device}")
+            raise UsageError(f"--id must be 1-{limit}, not {device}")
     if not 0.0 <= args.noise <= 1.0:
-        raise ValueError(f"--noise must be between 0 and 1, not {args.noise}")
+        raise UsageError(f"--noise must be between 0 and 1, not {args.noise}")
     width = _object_width(args.object_width)
     models = {
         device: GripperModel(device, now=time.monotonic(), object_width=width) for device in ids

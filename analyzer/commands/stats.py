@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     opts = CaptureOptions.from_args(args)
     listener = StatsListener()
     session, reader = run_capture(opts, [listener])
-    code = finish_capture(opts.path, session, reader)
+    code = finish_capture(opts.path, session, reader, opts)
     data = listener.stats.as_dict()
     if args.format == "json":
         sys.stdout.buffer.write(orjson.dumps(data, option=orjson.OPT_INDENT_2) + b"\n")

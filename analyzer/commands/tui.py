@@ -13,9 +13,8 @@ from ..batches import ENGINES
 from ..errors import EXIT_ERROR, UsageError
 from ..listener import Listener
 from ..rerun_target import add_rerun_argument, rerun_listener
-from ..session import Session, SessionOptions
+from ..session import Session, SessionOptions, signals_call
 from ..sources.live import Tap
-from ..sources.source import LiveSource
 from .common import (
     CaptureOptions,
     byte_protocol,
@@ -26,7 +25,13 @@ from .common import (
 )
 from .demo import add_demo_arguments
 from .livesource import add_source_arguments, open_taps
-from .session import add_session_arguments, byte_times, recorder
+from .session import (
+    add_session_arguments,
+    byte_times,
+    check_recording_name,
+    open_source,
+    recorder,
+)
 
 if TYPE_CHECKING:
     from ..tui.app import Eg2ScopeApp, SessionPlan
@@ -119,7 +124,15 @@ def live_plan(
 ) -> SessionPlan:
     from ..tui.app import SessionPlan
 
-    record: Listener | None = recorder(args.output, taps) if args.output else None
+    if args.output:
+        check_recording_name(args.output)
+    # opened first: a device that does not open fails here (exit 1), before a recording is made
+    source = open_source(taps, args.queue_size, on_start)
+    try:
+        record: Listener | None = recorder(args.output, taps) if args.output else None
+    except BaseException:
+        source.stop()
+        raise
     options = SessionOptions(
         protocol=session_protocol(args),
         per_bus=per_bus,
@@ -130,9 +143,6 @@ def live_plan(
     outputs = ([] if record is None else [record]) + list(extra or [])
 
     def build(feed: Listener) -> Session:
-        source = LiveSource(taps, args.queue_size)
-        if on_start is not None:
-            source.on_started = on_start
         return Session(source, [*outputs, feed], options)
 
     names = ", ".join(t.bus for t in taps)
@@ -200,7 +210,8 @@ def run(args: argparse.Namespace) -> int:
             app = Eg2ScopeApp(plan)
         except ValueError as exc:  # the session cannot be made (an engine that cannot apply)
             raise UsageError(f"--engine {args.engine}: {exc}") from None
-        app.run()
+        with signals_call(lambda: _stop_app(app)):  # as 'q' does, the recording finished
+            app.run()
         app.stop_session()  # however the app ended: the session closes every listener
     return finish(args, app, notes)
 
@@ -225,3 +236,13 @@ def finish(args: argparse.Namespace, app: Eg2ScopeApp, notes: Notes) -> int:
         return EXIT_ERROR
     damaged = bool(session.source.errors)
     return exit_code(session.counts, damaged=damaged, failed=bool(session.detached))
+
+
+def _stop_app(app: Any) -> None:
+    """Ctrl-C, SIGTERM or SIGHUP: end the session as an interrupt and quit as 'q' does."""
+    if app.session is not None:
+        app.session.interrupt()
+    try:
+        app.call_from_thread(app.action_quit)
+    except RuntimeError:  # the app is not running (yet, or any more)
+        app.exit(0)

@@ -393,7 +393,7 @@ class PythonCanFileReader(_FileReaderBase):
         except OSError:
             raise
         except Exception as exc:  # a damaged header: nothing to read
-            self._error(f"{self.path.name}: cannot open: {self._cannot_open(exc)}")
+            self._error(f"cannot open: {self._cannot_open(exc)}")  # the caller names the file
             return None
 
     def _cannot_open(self, exc: BaseException) -> str:

@@ -19,14 +19,17 @@ back-off (``reopened``, with the gap); an adapter that fails on every receive is
 one ``lost`` event with a count, not thousands. The tap never calls ``send``.
 
 Settings that can never work raise ``UsageError`` when the tap is made: an interface python-can
-does not know, an empty or malformed channel, a bit rate that is not a positive number. A
-setting the interface itself refuses when opened (``ValueError``/``TypeError``, or its driver
-missing: ``CanInterfaceNotImplementedError``) ends the tap with one ERROR event (``failed``);
-anything else (no such adapter yet, interface down) is retried.
+does not know, an empty or malformed channel, a bit rate that is not a positive number. A bus
+that does not open at the first attempt (no such CAN interface, a driver missing, an adapter
+not plugged in) is reported by ``first_open`` in a user's words, so the command fails at once,
+unless ``wait`` (``--wait``: waited for with back-off; a setting the interface refuses or a
+driver missing still fails at once). A bus that was open and goes down is reopened with
+back-off.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import socket
@@ -42,7 +45,7 @@ import can
 from ..errors import UsageError
 from ..model import INFO, WARNING, Item
 from .can_message import message_to_frame
-from .live import Tap, TapQueue
+from .live import Tap, TapQueue, first_attempts_over
 from .supervisor import MAX_RETRY_INTERVAL, RETRY_INTERVAL, Backoff, Device, Supervisor
 
 RECV_TIMEOUT = 0.1  # the receive timeout: bounds how long stopping takes
@@ -70,6 +73,16 @@ SIMULATED = {"virtual": "virtual bus (simulated)", "udp_multicast": "UDP multica
 
 IFNAMSIZ = 16  # Linux network interface names: at most 15 characters
 _MALFORMED_CHANNEL = re.compile(r"^$|\s|[\x00-\x1f]")
+
+# errors a CAN bus gives when it is opened, in a user's words
+BUS_ERRORS = {
+    errno.ENODEV: "no such CAN interface",
+    errno.ENOENT: "no such device or port",
+    errno.EAFNOSUPPORT: "this kernel has no SocketCAN (address family AF_CAN not supported)",
+    errno.ENETDOWN: "the interface is down",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+}
 
 NEVER_SENDS = "the tap never sends"
 ACKS = "its controller acknowledges frames and may send error frames"
@@ -166,6 +179,21 @@ def _socketcan_link_down(channel: str) -> bool:
     return not flags & 0x1  # IFF_UP
 
 
+def bus_error(exc: BaseException) -> str:
+    """Why a CAN bus did not open, in a user's words: "no such CAN interface", "driver not
+    found (...)" (python-can's own words in brackets where they add something)."""
+    text = str(exc).strip()
+    cause: BaseException | None = exc
+    while cause is not None:  # python-can wraps the OS's error (slcan: the serial port's)
+        if isinstance(cause, OSError) and cause.errno in BUS_ERRORS:
+            return BUS_ERRORS[cause.errno]
+        cause = cause.__cause__ or cause.__context__
+    missing = isinstance(exc, can.CanInterfaceNotImplementedError | ImportError)
+    if missing or re.search(r"(library|driver|dll)\b.*\bnot (found|loaded)", text, re.I):
+        return f"driver not found ({text or type(exc).__name__})"
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
 class _FrameListener(can.Listener):
     """can.Message -> CanFrame -> TapQueue, on the tap's thread. Never blocks."""
 
@@ -245,6 +273,9 @@ class _Channel(Device[_OpenBus]):
     def open(self) -> _OpenBus:
         return _OpenBus(self.tap.open_bus(), _FrameListener(self.tap, self.out))
 
+    def why(self, exc: BaseException) -> str:
+        return bus_error(exc)
+
     def describe(self, handle: _OpenBus) -> str:
         return f" at {self.tap.bitrate} bit/s" if self.tap.bitrate else ""
 
@@ -291,6 +322,7 @@ class CanTap(Tap):
         listen_only: bool = True,
         retry_interval: float = RETRY_INTERVAL,
         max_retry_interval: float = MAX_RETRY_INTERVAL,
+        wait: bool = False,
         recv_timeout: float = RECV_TIMEOUT,
         **kwargs: Any,
     ) -> None:
@@ -301,6 +333,7 @@ class CanTap(Tap):
         self.bitrate = bitrate
         self.listen_only = listen_only
         self.backoff = Backoff(retry_interval, max_retry_interval)
+        self.wait = wait
         self.recv_timeout = recv_timeout
         self.kwargs = dict(kwargs)
         self.frames = 0
@@ -356,6 +389,13 @@ class CanTap(Tap):
     def failed(self) -> str | None:
         return None if self._supervisor is None else self._supervisor.failed
 
+    def first_open(self) -> str | None:
+        if self._supervisor is None:
+            return None
+        first_attempts_over([self._supervisor.first_attempt])
+        why = self._supervisor.failed
+        return None if why is None else f"{self._label()}: {why}"
+
     def start(self, out: TapQueue) -> None:
         if self._out is not None:
             raise RuntimeError(f"tap {self.bus!r} is already running")
@@ -368,7 +408,7 @@ class CanTap(Tap):
         def emit(level: int, kind: str, message: str, count: int) -> None:
             self.event(out, level, kind, message, count)
 
-        self._supervisor = Supervisor(channel, emit, self.backoff)
+        self._supervisor = Supervisor(channel, emit, self.backoff, self.wait)
         self._thread = threading.Thread(
             target=self._supervisor.run,
             args=(self._stop,),
@@ -404,7 +444,7 @@ class CanTap(Tap):
         )
         if self.interface == "socketcan" and _socketcan_link_down(self.channel_name):
             _shutdown(bus)
-            raise OSError(f"interface {self.channel_name} is down")
+            raise OSError(errno.ENETDOWN, f"interface {self.channel_name} is down")
         enlarge_receive_buffer(bus)
         return bus
 

@@ -17,6 +17,11 @@ from typing import Any
 
 from ..model import Item, SourceEvent
 
+# the events of a tap whose device went away (lost: the source failed) or was closed (the
+# capture stopped): what was held for the bus's frames ends there
+LOST = "lost"
+CLOSED = "closed"
+
 
 class TapQueue:
     """Bounded hand-over from capture threads to the consumer, counting what it had to drop.
@@ -71,6 +76,8 @@ class Tap:
     bus: str
     passive: str = "unknown"
     settings: dict[str, Any] = field(default_factory=dict)
+    #: a serial tap named after the protocol its bytes show (sources/naming.py), not yet named
+    named_by_protocol = False
 
     @property
     def is_open(self) -> bool:
@@ -88,8 +95,21 @@ class Tap:
         """Why the tap gave up for good (a setting its device refuses), else None."""
         return None
 
+    def first_open(self) -> str | None:
+        """After ``start``: block until the first attempt to open the tap's device(s) is over.
+        None when they opened (or are waited for: ``--wait``), else why not, naming the device
+        ("/dev/ttyUSB0: no such port"). A tap that opens nothing returns None."""
+        return None
+
     def event(self, out: TapQueue, level: int, kind: str, message: str, count: int = 1) -> None:
         out.put(SourceEvent(time.time(), self.bus, level, message, kind, count))
+
+
+def first_attempts_over(events: list[threading.Event]) -> None:
+    """Wait for every event; in short steps, so Ctrl-C is seen at once meanwhile."""
+    for event in events:
+        while not event.wait(0.1):
+            pass
 
 
 def wait_open(taps: list[Tap], timeout: float = 3.0) -> bool:

@@ -20,8 +20,10 @@ for a moment; ``rts``/``dtr`` choose otherwise for adapters that need it. The st
 ``settings`` (and so in a recording's metadata).
 
 Settings a port can never take (a negative baud rate, an unknown URL scheme, a malformed
-``socket://`` URL, an empty port name) raise ``UsageError`` when the tap is made; only a port
-that may appear or come back is retried.
+``socket://`` URL, an empty port name) raise ``UsageError`` when the tap is made. A port that
+does not open at the first attempt (no such port, permission denied) is reported by
+``first_open``, so the command fails at once, unless ``wait`` (``--wait``: a device not plugged
+in yet, waited for with back-off); a port that was open and goes away is reopened with back-off.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from decoders.model import REQUEST, RESPONSE, Chunk
 
 from ..errors import UsageError
 from ..model import INFO, WARNING, Item
-from .live import Tap, TapQueue
+from .live import Tap, TapQueue, first_attempts_over
 from .supervisor import MAX_RETRY_INTERVAL, RETRY_INTERVAL, Backoff, Device, Supervisor
 
 READ_TIMEOUT = 0.05  # read timeout: bounds how long stop() waits for a capture thread
@@ -51,14 +53,21 @@ URL_SCHEMES_PARSED_AT_OPEN = ("rfc2217", "socket", "loop")  # checked when the t
 OnData = Callable[[bytes, float], None]
 
 
+# errors a port gives when it is opened, in a user's words
+PORT_ERRORS = {
+    errno.ENOENT: "no such port",
+    errno.ENODEV: "no such device",
+    errno.ENXIO: "no such device",
+    errno.EACCES: "permission denied (is the user in the port's group, e.g. dialout?)",
+    errno.EBUSY: "the port is busy (another program has it open)",
+}
+
+
 def _describe(exc: BaseException) -> str:
-    """An error as one short phrase: "[Errno 2] No such file or directory" rather than
-    pyserial's "[Errno 2] could not open port X: [Errno 2] No such file or directory: 'X'"."""
+    """An error as one short phrase: "no such port" rather than pyserial's "[Errno 2] could
+    not open port X: [Errno 2] No such file or directory: 'X'"."""
     if isinstance(exc, OSError) and isinstance(exc.errno, int) and exc.errno > 0:
-        text = f"[Errno {exc.errno}] {os.strerror(exc.errno)}"
-        if exc.errno == errno.EACCES:
-            text += " (is the user in the port's group, e.g. dialout?)"
-        return text
+        return PORT_ERRORS.get(exc.errno) or f"[Errno {exc.errno}] {os.strerror(exc.errno)}"
     text = str(exc)
     return text if text else type(exc).__name__
 
@@ -108,6 +117,7 @@ class _PortReader(Device[serial.SerialBase]):
         serial_kwargs: dict[str, Any],
         *,
         backoff: Backoff,
+        wait: bool,
         read_timeout: float,
         rts: bool,
         dtr: bool,
@@ -123,7 +133,7 @@ class _PortReader(Device[serial.SerialBase]):
         self.dtr = dtr
         self.bytes = 0
         self.chunks = 0
-        self.supervisor = Supervisor(self, self._emit, backoff)
+        self.supervisor = Supervisor(self, self._emit, backoff, wait)
         self._ser: serial.SerialBase | None = None
         self._lock = threading.Lock()  # guards _ser between the reader and a bridge's writer
         self._thread: threading.Thread | None = None
@@ -234,11 +244,13 @@ class _SerialTapBase(Tap):
         *,
         retry_interval: float,
         max_retry_interval: float,
+        wait: bool,
         read_timeout: float,
         rts: bool,
         dtr: bool,
     ) -> None:
         self.baudrate = baudrate
+        self.wait = wait
         self.rts = rts
         self.dtr = dtr
         self.serial_kwargs = _serial_kwargs(baudrate, serial_kwargs)
@@ -277,6 +289,10 @@ class _SerialTapBase(Tap):
         reasons = [f"{r.port}: {r.supervisor.failed}" for r in self._readers if r.supervisor.failed]
         return "; ".join(reasons) or None
 
+    def first_open(self) -> str | None:
+        first_attempts_over([r.supervisor.first_attempt for r in self._readers])
+        return self.failed
+
     def start(self, out: TapQueue) -> None:
         if self._out is not None:
             raise RuntimeError(f"tap {self.bus!r} is already running")
@@ -312,6 +328,7 @@ class _SerialTapBase(Tap):
             on_data,
             self.serial_kwargs,
             backoff=self.backoff,
+            wait=self.wait,
             read_timeout=self.read_timeout,
             rts=self.rts,
             dtr=self.dtr,
@@ -350,6 +367,7 @@ class SerialTap(_SerialTapBase):
         *,
         retry_interval: float = RETRY_INTERVAL,
         max_retry_interval: float = MAX_RETRY_INTERVAL,
+        wait: bool = False,
         read_timeout: float = READ_TIMEOUT,
         rts: bool = False,
         dtr: bool = False,
@@ -370,6 +388,7 @@ class SerialTap(_SerialTapBase):
             serial_kwargs,
             retry_interval=retry_interval,
             max_retry_interval=max_retry_interval,
+            wait=wait,
             read_timeout=read_timeout,
             rts=rts,
             dtr=dtr,
@@ -397,6 +416,7 @@ class SerialPairTap(_SerialTapBase):
         directions: Sequence[str | None] | None = None,
         retry_interval: float = RETRY_INTERVAL,
         max_retry_interval: float = MAX_RETRY_INTERVAL,
+        wait: bool = False,
         read_timeout: float = READ_TIMEOUT,
         rts: bool = False,
         dtr: bool = False,
@@ -429,6 +449,7 @@ class SerialPairTap(_SerialTapBase):
             serial_kwargs,
             retry_interval=retry_interval,
             max_retry_interval=max_retry_interval,
+            wait=wait,
             read_timeout=read_timeout,
             rts=rts,
             dtr=dtr,
@@ -464,6 +485,7 @@ class SerialBridge(_SerialTapBase):
         *,
         retry_interval: float = RETRY_INTERVAL,
         max_retry_interval: float = MAX_RETRY_INTERVAL,
+        wait: bool = False,
         read_timeout: float = READ_TIMEOUT,
         write_timeout: float = WRITE_TIMEOUT,
         rts: bool = False,
@@ -492,6 +514,7 @@ class SerialBridge(_SerialTapBase):
             {"write_timeout": write_timeout, **serial_kwargs},
             retry_interval=retry_interval,
             max_retry_interval=max_retry_interval,
+            wait=wait,
             read_timeout=read_timeout,
             rts=rts,
             dtr=dtr,

@@ -13,8 +13,10 @@ import time
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
+from ..errors import SourceError
 from ..model import WARNING, Item, SourceEvent
 from .live import Tap, TapQueue
+from .naming import BusNamer
 from .pacing import paced
 
 if TYPE_CHECKING:
@@ -26,6 +28,8 @@ LIVE_BATCH_S = 0.05  # live: decode and show 20 times a second
 LIVE_BATCH_ITEMS = 2000  # and after a backlog, in steps short enough to keep views refreshed
 CAPTURE_BATCH_ITEMS = 2048  # captures: CAN frames (or byte chunks) per batch
 CAPTURE_BATCH_BYTES = 1 << 16  # ... or this many bytes of chunks
+# the words of a device that is not there (yet): --wait would wait for it
+ABSENT = ("no such", "is down")
 
 
 class Source:
@@ -54,9 +58,16 @@ class Source:
         """Damage found in the input (a capture file); empty for live sources."""
         return []
 
+    @property
+    def protocols(self) -> dict[str, str]:
+        """The protocols of buses the source named after them (bus -> protocol), so the
+        decoding uses the protocol a name says (sources/naming.py)."""
+        return {}
+
 
 class LiveSource(Source):
-    """One or more taps feeding one bounded queue."""
+    """One or more taps feeding one bounded queue. ``start`` opens them: a tap whose device
+    does not open raises ``SourceError`` (unless it waits for it: ``--wait``)."""
 
     live = True
 
@@ -67,10 +78,34 @@ class LiveSource(Source):
         self.queue = TapQueue(queue_size)
         self.dropped = 0
         self.on_started: Callable[[], None] | None = None  # runs once the taps listen
+        self.started = False
+        self.namer = BusNamer(taps)
+
+    @property
+    def protocols(self) -> dict[str, str]:
+        return self.namer.protocols
 
     def start(self) -> None:
-        for tap in self.taps:
-            tap.start(self.queue)
+        """Start every tap and wait for each one's first attempt to open its device; if any
+        did not open, stop them all and raise ``SourceError`` naming each device and why.
+        Once started, calling it again does nothing (a command opens its source before it
+        makes its outputs, and the session then runs it)."""
+        if self.started:
+            return
+        self.started = True
+        try:
+            for tap in self.taps:
+                tap.start(self.queue)
+            failures = [why for why in (tap.first_open() for tap in self.taps) if why]
+        except BaseException:
+            self._stop_taps()
+            raise
+        if failures:
+            self._stop_taps()
+            self.queue.get_batch(0.0, max_items=10**9)  # their events: the error says it all
+            absent = any(word in why for why in failures for word in ABSENT)
+            hint = " (--wait waits for a device that is not plugged in yet)" if absent else ""
+            raise SourceError("; ".join(f"cannot open {why}" for why in failures) + hint)
         if self.on_started is not None:
             self.on_started()
 
@@ -93,24 +128,26 @@ class LiveSource(Source):
             drops = self._drops()
             if drops is not None:
                 batch.append(drops)
-            yield batch
+            yield self.namer.sort(batch)
 
     def stop(self) -> Batch:
-        rest: Batch = []
-        for tap in self.taps:
-            try:
-                tap.stop()
-            except Exception as exc:  # a failing close must not lose the recording
-                rest.append(
-                    SourceEvent(
-                        time.time(), tap.bus, WARNING, f"error while closing: {exc}", "closed"
-                    )
-                )
+        rest = self._stop_taps()
         rest = self.queue.get_batch(0.0, max_items=10**9) + rest
         drops = self._drops()
         if drops is not None:
             rest.append(drops)
-        return rest
+        return self.namer.sort(rest) + self.namer.finish()
+
+    def _stop_taps(self) -> Batch:
+        """Stop every tap; a failing close is an event (it must not lose the recording)."""
+        events: Batch = []
+        for tap in self.taps:
+            try:
+                tap.stop()
+            except Exception as exc:
+                message = f"error while closing: {exc}"
+                events.append(SourceEvent(time.time(), tap.bus, WARNING, message, "closed"))
+        return events
 
     def _drops(self) -> SourceEvent | None:
         n = self.queue.new_drops()
@@ -143,8 +180,12 @@ class CaptureSource(Source):
         return self.reader.errors
 
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
-        if self.speed is not None:  # paced: each item as it falls due
-            for x in paced(self.reader, self.speed):
+        if self.speed is not None:  # paced: each item as it falls due (a stop wakes it)
+
+            def nap(seconds: float) -> None:
+                stop.wait(seconds)
+
+            for x in paced(self.reader, self.speed, sleep=nap):
                 yield [x]
                 if stop.is_set():
                     return

@@ -4,11 +4,18 @@ Both live taps run it on their capture threads (one per serial port, one per CAN
 tap supplies a :class:`Device` (how to open, capture from and close it) and receives
 SourceEvents:
 
-- ``open``: opened (INFO, once); or "cannot open ..." (ERROR, once, while the first attempts
-  fail; the loop keeps trying, since a port may appear) or "... not retrying" (ERROR, when the
-  device refuses a setting: a ``Device.fatal`` exception; the loop ends, ``failed`` says why);
+- ``open``: opened (INFO, once); or "cannot open ..." (ERROR) when the first attempt fails:
+  a device that never opened is an error of the command line, not something to wait for, so
+  the loop ends and ``failed`` says why (the source fails the command at once: ``SourceError``).
+  With ``wait`` (``--wait``: a device not plugged in yet) a first attempt that fails is
+  reported once ("waiting for ...", WARNING) and retried with back-off until the device
+  appears; a setting the device refuses (a ``Device.fatal`` exception) ends the loop even so;
 - ``lost``: the device failed while capturing (WARNING);
-- ``reopened``: open again after a loss, with the length of the gap (INFO).
+- ``reopened``: open again after a loss, with the length of the gap (INFO). A device that was
+  open and went away is always reopened with back-off.
+
+``first_attempt`` is set once the first attempt is over, opened or not, so the tap's starter can
+wait for it and fail at once.
 
 Waits between attempts double from ``Backoff.first`` up to ``Backoff.cap`` and start over once
 the device has stayed open for ``cap`` seconds. A device that keeps failing right after each
@@ -106,12 +113,16 @@ class _Series:
 class Supervisor(Generic[H]):
     """Runs ``device`` on the calling thread until ``stop`` is set (or a fatal error)."""
 
-    def __init__(self, device: Device[H], emit: Emit, backoff: Backoff | None = None) -> None:
+    def __init__(
+        self, device: Device[H], emit: Emit, backoff: Backoff | None = None, wait: bool = False
+    ) -> None:
         self.device = device
         self.emit = emit
         self.backoff = backoff or Backoff()
+        self.wait = wait  # a device not there at the first attempt is waited for
         self.is_open = False
         self.failed: str | None = None  # why the loop gave up (a fatal error), else None
+        self.first_attempt = threading.Event()  # the first open attempt is over
         self._stop = threading.Event()
         self._series: _Series | None = None
         self._delay = self.backoff.first
@@ -126,7 +137,10 @@ class Supervisor(Generic[H]):
         self._first_try = time.monotonic()
         try:
             while not stop.is_set():
-                handle = self._open()
+                try:
+                    handle = self._open()
+                finally:
+                    self.first_attempt.set()
                 if handle is None:
                     if self.failed is not None:
                         return
@@ -139,6 +153,7 @@ class Supervisor(Generic[H]):
                 self._wait()
         finally:
             self.is_open = False
+            self.first_attempt.set()  # stopped before its first attempt
             self._report_series()
 
     # -- the steps -----------------------------------------------------------------------------
@@ -153,17 +168,21 @@ class Supervisor(Generic[H]):
             self._event(ERROR, "open", f"cannot open {device.label}: {self.failed}; not retrying")
             return None
         except Exception as exc:
+            if not self._opens and not self.wait:  # never opened: fail, do not retry
+                self.failed = device.why(exc)
+                self._event(ERROR, "open", f"cannot open {device.label}: {self.failed}")
+                return None
             if not self._opens and not self._told_cannot_open:
                 self._told_cannot_open = True
                 why = f"{device.why(exc)}; {self.backoff.text()}"
-                self._event(ERROR, "open", f"cannot open {device.label}: {why}")
+                self._event(WARNING, "open", f"waiting for {device.label} ({why})")
             self._report_series()  # lost and not back: a series of losses ends here
             return None
         self._opened_at = now = time.monotonic()
         self._opens += 1
         if self._opens == 1:
             waited = now - self._first_try
-            after = f" after {waited:.2f} s of retries" if self._told_cannot_open else ""
+            after = f" after waiting {waited:.2f} s" if self._told_cannot_open else ""
             self._event(INFO, "open", f"opened {device.label}{device.describe(handle)}{after}")
             return handle
         gap = now - self._lost_at

@@ -13,6 +13,8 @@ pub const MALFORMED: &str = "malformed";
 pub const CAN_ERROR_FRAME: &str = "can_error_frame";
 /// a decoder bug caught on this frame
 pub const DECODER_ERROR: &str = "decoder_error";
+/// a frame begun, or a request waiting, when the capture was stopped (not a bus error)
+pub const CUT_OFF: &str = "cut_off";
 /// a request that never got its response
 pub const UNANSWERED: &str = "unanswered";
 /// a response with no request before it

@@ -102,12 +102,24 @@ impl LiveCan {
     pub fn finish(&mut self, out: &mut Vec<Record>) {
         self.pairer.flush(out);
     }
+
+    /// The capture of `bus` was stopped (`Decoding.cut_off`): its waiting requests are
+    /// flagged `cut_off` and released.
+    pub fn cut_off(&mut self, bus: &str, out: &mut Vec<Record>) {
+        self.pairer.cut_off(Some(bus), out);
+    }
+
+    /// The capture was stopped before its input ended (`Decoding.stop`): every request still
+    /// waiting is `cut_off`.
+    pub fn stop(&mut self, out: &mut Vec<Record>) {
+        self.pairer.cut_off(None, out);
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::flags::{ORPHAN_RESPONSE, UNANSWERED};
+    use crate::flags::{CUT_OFF, ORPHAN_RESPONSE, UNANSWERED};
     use crate::model::{EG2_CAN, FOREIGN_CAN, REQUEST, RESPONSE};
 
     fn frame(t: Option<f64>, aid: u32, data: &[u8]) -> CanFrame {
@@ -185,5 +197,28 @@ mod tests {
         );
         assert_eq!(out[0].protocol, EG2_CAN);
         assert_eq!(out[1].protocol, FOREIGN_CAN);
+    }
+
+    #[test]
+    fn a_stop_cuts_off_waiting_requests() {
+        let mut live = LiveCan::new(false, 0);
+        let mut out = Vec::new();
+        live.feed_bus("can0", &frame(Some(1.0), READ_1120, &[8]), &mut out);
+        live.feed_bus("can1", &frame(Some(1.0), READ_1120, &[8]), &mut out);
+        live.cut_off("can1", &mut out);
+        assert_eq!(
+            out.len(),
+            0,
+            "can0's request waits first, and can1's behind it"
+        );
+        live.stop(&mut out);
+        assert_eq!(out.len(), 2);
+        for rec in &out {
+            assert_eq!(rec.flags, vec![CUT_OFF]);
+            assert_eq!(
+                rec.warnings,
+                vec!["no response before the capture was stopped"]
+            );
+        }
     }
 }

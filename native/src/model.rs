@@ -18,6 +18,8 @@ pub const FOREIGN_CAN: &str = "can";
 pub const FRAME: &str = "frame";
 pub const GARBAGE: &str = "garbage";
 pub const TRUNCATED: &str = "truncated";
+/// the bytes of a frame begun when the capture was stopped (the Python's live byte streams)
+pub const CUT_OFF: &str = "cut_off";
 
 pub const REQUEST: &str = "request";
 pub const RESPONSE: &str = "response";

@@ -11,7 +11,7 @@
 //! Here every record that enters the hold gets a ticket (consecutive numbers), so a pending
 //! request is found in the hold by arithmetic, and "waiting" is a flag beside the record.
 
-use crate::flags::{ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED};
+use crate::flags::{CUT_OFF, ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED};
 use crate::model::{PairKey, Record, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE};
 use crate::pyfloat::{py_fixed, py_round};
 use std::collections::VecDeque;
@@ -19,6 +19,8 @@ use std::sync::Arc;
 
 pub const RETRANSMITTED: &str =
     "retransmission: the same request again before the first was answered";
+/// a request waiting when the capture was stopped (`cut_off`)
+pub const STOPPED_WAITING: &str = "no response before the capture was stopped";
 
 /// Protocols on which a host has one question open at a time (RS232 question/answer, RS485
 /// half duplex): a new request on the bus means the previous one will not be answered.
@@ -323,6 +325,25 @@ impl Pairer {
         self.release(out);
     }
 
+    /// The capture of `bus` (None: of every bus) was stopped: the requests waiting there are
+    /// flagged `cut_off`, not unanswered (their answers may have come after the stop), and
+    /// released. With `bus` None nothing is held afterwards.
+    pub fn cut_off(&mut self, bus: Option<&str>, out: &mut Vec<Record>) {
+        let mut keys = std::mem::take(&mut self.scratch);
+        keys.clear();
+        keys.extend(
+            self.pending
+                .keys()
+                .copied()
+                .filter(|k| bus.is_none_or(|b| self.streams.bus(k.0) == b)),
+        );
+        for key in keys.drain(..) {
+            self.close_as(key, STOPPED_WAITING, CUT_OFF);
+        }
+        self.scratch = keys;
+        self.release(out);
+    }
+
     /// A request from before `position` (a byte offset, or a CAN frame index) still waits.
     pub fn waiting_before(&self, position: u64) -> bool {
         self.held.iter().filter(|h| h.waiting).any(|h| {
@@ -455,22 +476,32 @@ impl Pairer {
 
     /// No more answers will come for the requests waiting on key.
     fn close(&mut self, key: Key, why: &str) {
+        self.close_as(key, why, UNANSWERED);
+    }
+
+    /// `close`, flagging the requests `code` (why they will not be answered).
+    fn close_as(&mut self, key: Key, why: &str, code: &'static str) {
         let Some(c) = self.pending.get(&key) else {
             return;
         };
         let tickets: Vec<u64> = c.iter().collect();
         for ticket in tickets {
-            self.drop_request(key, ticket, why);
+            self.drop_request_as(key, ticket, why, code);
         }
     }
 
     /// A waiting request will not be answered: say so on it (unless an earlier copy of it was
     /// answered) and stop waiting.
     fn drop_request(&mut self, key: Key, ticket: u64, why: &str) {
+        self.drop_request_as(key, ticket, why, UNANSWERED);
+    }
+
+    /// `drop_request`, flagging the request `code`.
+    fn drop_request_as(&mut self, key: Key, ticket: u64, why: &str, code: &'static str) {
         let answered = self.answered.contains(&key);
         let held = self.held_mut(ticket);
         if !answered {
-            held.rec.warning(UNANSWERED, why.to_string());
+            held.rec.warning(code, why.to_string());
         }
         held.waiting = false;
         let left = self.pending.get_mut(&key).is_some_and(|c| c.remove(ticket));

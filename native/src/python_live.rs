@@ -892,6 +892,20 @@ impl PyLiveCan {
         RecordBatch::from_records(out)
     }
 
+    /// `Decoding.cut_off(bus)`: the capture of the bus was stopped.
+    fn cut_off(&mut self, bus: &str) -> RecordBatch {
+        let mut out = Vec::new();
+        self.core.cut_off(bus, &mut out);
+        RecordBatch::from_records(out)
+    }
+
+    /// `Decoding.stop()`: the capture was stopped before its input ended.
+    fn stop(&mut self) -> RecordBatch {
+        let mut out = Vec::new();
+        self.core.stop(&mut out);
+        RecordBatch::from_records(out)
+    }
+
     /// The number the next frame gets (`Decoding.can_index`).
     #[getter]
     fn can_index(&self) -> u64 {

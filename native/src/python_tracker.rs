@@ -18,8 +18,8 @@ use super::python_live::RecordBatch;
 use crate::flags::{OUT_OF_RANGE, UNANSWERED};
 use crate::hash::FastMap;
 use crate::model::{
-    Fields, Record, Str, Value, EG2_CAN, EG2_SERIAL, FOREIGN_CAN, FRAME, GARBAGE, MODBUS_RTU,
-    REQUEST, RESPONSE, TRUNCATED,
+    Fields, Record, Str, Value, CUT_OFF, EG2_CAN, EG2_SERIAL, FOREIGN_CAN, FRAME, GARBAGE,
+    MODBUS_RTU, REQUEST, RESPONSE, TRUNCATED,
 };
 use crate::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError, PyValueError};
@@ -750,7 +750,7 @@ fn record_from_py(rec: &Bound<'_, PyAny>, buses: &mut Vec<Arc<str>>) -> PyResult
         "protocol",
     )?;
     let kind: String = rec.getattr(intern!(py, "kind"))?.extract()?;
-    let kind = static_name(&kind, &[FRAME, GARBAGE, TRUNCATED], "kind")?;
+    let kind = static_name(&kind, &[FRAME, GARBAGE, TRUNCATED, CUT_OFF], "kind")?;
     let mut r = Record::new(
         rec.getattr(intern!(py, "t"))?.extract()?,
         bus,

@@ -214,8 +214,8 @@ def test_ctrl_c_in_a_parallel_decode_is_one_clean_line(tmp_path: Path) -> None:
 
 def test_live_jsonl_carries_source_events(tmp_path: Path) -> None:
     res = eg2scope(
-        "live", "--serial", str(tmp_path / "ttyGone"), "-f", "jsonl", "--duration", "1.5"
-    )
+        "live", "--serial", str(tmp_path / "ttyGone"), "--wait", "-f", "jsonl", "--duration", "1.5"
+    )  # fmt: skip
     assert res.returncode == 0, res.stderr
     events = [json.loads(x) for x in res.stdout.splitlines()]
     assert events and all(e["kind"] == "event" for e in events)
@@ -225,7 +225,7 @@ def test_live_jsonl_carries_source_events(tmp_path: Path) -> None:
 
 def test_record_without_show_prints_events_as_they_happen(tmp_path: Path) -> None:
     res = eg2scope(
-        "record", "--serial", str(tmp_path / "ttyGone"), "-o", str(tmp_path / "r.mcap"),
+        "record", "--serial", str(tmp_path / "ttyGone"), "--wait", "-o", str(tmp_path / "r.mcap"),
         "--duration", "1.5",
     )  # fmt: skip
     assert res.returncode == 0, res.stderr

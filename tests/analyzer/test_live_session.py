@@ -8,7 +8,6 @@ import os
 import threading
 import time
 import tty
-import typing
 from pathlib import Path
 
 import can
@@ -20,7 +19,7 @@ from analyzer.session import Session, live_session
 from analyzer.sinks.text import TextListener
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.capture import open_capture
-from analyzer.sources.live import TapQueue
+from analyzer.sources.live import Tap, TapQueue
 from analyzer.sources.serial_tap import SerialTap
 from decoders import build as b
 from decoders.model import Chunk, Record
@@ -128,11 +127,7 @@ def test_can_tap_on_virtual_bus_records_and_replays(tmp_path: Path) -> None:
 
 
 def test_drops_are_counted_and_reported() -> None:
-    class Flood:
-        bus = "flood"
-        passive = "yes"
-        settings: typing.ClassVar[dict] = {}
-
+    class Flood(Tap):
         def start(self, out: TapQueue) -> None:
             for _ in range(500):
                 out.put(Item("flood", Chunk(b"\x00", time.time())))
@@ -142,7 +137,7 @@ def test_drops_are_counted_and_reported() -> None:
 
     out = io.StringIO()
     session = live_session(
-        [Flood()],  # type: ignore[list-item]
+        [Flood("flood", "yes")],
         [TextListener(out, colour=False)],
         queue_size=10,
         duration=0.3,

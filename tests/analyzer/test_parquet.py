@@ -534,7 +534,9 @@ def test_parquet_refuses_a_terminal() -> None:
         os.close(follower)
         os.close(leader)
     assert done.returncode == 2
-    assert b"--format parquet writes a binary file: give -o FILE.parquet" in done.stderr
+    assert b"--format parquet writes a binary file, not to a terminal: give -o FILE.parquet" in (
+        done.stderr
+    )
     assert shown == b""
 
 

@@ -79,9 +79,9 @@ def python_step(dec: Decoding, step: Step) -> list[Record]:
         return out
     if op == "tick":
         return dec.tick(step[1])
-    if op == "gap":
-        return dec.gap(step[1])
-    return dec.finish()
+    if op in ("gap", "cut_off"):
+        return getattr(dec, op)(step[1])
+    return dec.stop() if op == "stop" else dec.finish()
 
 
 def native_step(live: Any, step: Step) -> RecordBatch:
@@ -90,9 +90,9 @@ def native_step(live: Any, step: Step) -> RecordBatch:
         return live.feed(step[1])
     if op == "tick":
         return live.tick(step[1])
-    if op == "gap":
-        return live.gap(step[1])
-    return live.finish()
+    if op in ("gap", "cut_off"):
+        return getattr(live, op)(step[1])
+    return live.stop() if op == "stop" else live.finish()
 
 
 def check_batch(batch: RecordBatch, want: list[Record], where: str) -> None:
@@ -344,6 +344,25 @@ def test_gap_mid_stream() -> None:
     steps += [("feed", items[301:700]), ("gap", "can1"), ("gap", "can0")]
     steps += [("feed", items[700:]), ("finish",), ("tick", T0 + 1e4), ("finish",)]
     everything, _ = run_both(steps)
+    assert any("no response before the source was lost" in r.warnings for r in everything)
+
+
+def test_a_stop_cuts_off_what_waits() -> None:
+    """At a user's stop (a bus's tap closed, then the session's end) the requests waiting are
+    cut off by the stop, flagged ``cut_off`` and not ``unanswered``, the same in both engines;
+    a source lost before keeps its wording."""
+    frames = realistic(1000)
+    items = items_of(frames, ("can0", "can1"), seed=4)
+    steps: list[Step] = [("feed", items[:401]), ("gap", "can1"), ("feed", items[401:800])]
+    steps += [("cut_off", "can0"), ("feed", items[800:]), ("cut_off", "nowhere")]
+    steps += [("stop",), ("stop",)]  # the second: nothing is left
+    everything, _ = run_both(steps)
+    assert len(everything) == len(items)  # every frame came out
+    cut = [r for r in everything if "cut_off" in r.flags]
+    assert cut
+    for r in cut:
+        assert r.direction == "request" and "unanswered" not in r.flags
+        assert r.warnings[-1] == "no response before the capture was stopped"
     assert any("no response before the source was lost" in r.warnings for r in everything)
 
 

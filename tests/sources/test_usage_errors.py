@@ -1,6 +1,6 @@
 """Options that can never work fail at once, before anything opens, with a UsageError (a
-ValueError: the command line's exit 2) saying what is wrong; only a device that may appear or
-come back is retried."""
+ValueError: the command line's exit 2) saying what is wrong, on every command. (A device that
+does not open is not a usage error: exit 1, tests/taps/test_never_opened.py.)"""
 
 from __future__ import annotations
 
@@ -162,3 +162,63 @@ def test_cli_exits_at_once_with_a_usage_error(argv: list[str], message: str) -> 
     assert time.monotonic() - t0 < 15  # not retried until --duration runs out
     assert proc.returncode == 2, proc.stderr
     assert message in proc.stderr and "Traceback" not in proc.stderr
+
+
+# -- every command: a bad option value is exit 2 -----------------------------------------------
+
+SERIAL_DUMP = str(ROOT / "captures" / "serial_session.bin")
+
+# at least one bad value per command the parser refuses, and one it can only refuse after
+# parsing (a UsageError): both must be exit 2, at once, with a message and no traceback
+BAD_OPTIONS: list[tuple[str, list[str], str]] = [
+    ("decode", [SERIAL_DUMP, "--format", "nope"], "invalid choice: 'nope'"),
+    ("decode", [SERIAL_DUMP, "-p", "can"], "CAN is chosen by the file"),
+    ("decode", [SERIAL_DUMP, "-o", SERIAL_DUMP], "is the input"),
+    ("stats", [SERIAL_DUMP, "--device", "-1"], "must be 0 or more"),
+    ("stats", [SERIAL_DUMP, "--protocol", "foo"], "unknown protocol 'foo'"),
+    ("live", ["--serial", "/dev/ttyUSB0", "--protocol", "foo"], "unknown protocol 'foo'"),
+    ("live", ["--serial", "/dev/ttyUSB0", "--protocol", "can"], "a CAN source is always CAN"),
+    ("live", ["--serial", "/dev/ttyUSB0", "--baud", "-5"], "impossible baud rate -5"),
+    ("record", ["--serial", "/dev/ttyUSB0", "-o", "run.txt"], "name the output *.mcap"),
+    ("record", ["--demo", "-o", "x.mcap", "--queue-size", "0"], "must be 1 or more"),
+    ("bridge", ["/dev/ttyUSB0", "/dev/ttyUSB1", "--protocol", "foo"], "unknown protocol"),
+    ("bridge", ["/dev/ttyUSB0", "/dev/ttyUSB0"], "must differ"),
+    ("sim", ["serial", "--id", "0"], "--id must be 1-254"),
+    ("sim", ["serial", "--object-width", "wide"], "--object-width must be 0-1000"),
+    ("demo", ["--buses", "lin"], "unknown demo bus lin"),
+    ("demo", ["--duration", "0"], "must be a positive number"),
+    ("plot", [], "nothing to plot"),
+    ("plot", ["--demo", "--protocol", "foo"], "unknown protocol 'foo'"),
+    ("tui", ["--protocol", "foo"], "unknown protocol 'foo'"),
+    ("tui", [SERIAL_DUMP, "--demo"], "not both"),
+    ("batch", [SERIAL_DUMP, "-o", "fleet", "--workers", "0"], "must be 1 or more"),
+    ("batch", [SERIAL_DUMP], "required: --output"),
+]
+
+
+def test_every_command_is_in_the_table() -> None:
+    from analyzer.commands import SUBCOMMANDS
+
+    assert {command for command, _, _ in BAD_OPTIONS} == set(SUBCOMMANDS)
+
+
+@pytest.mark.parametrize(
+    ("command", "argv", "message"),
+    BAD_OPTIONS,
+    ids=[f"{c}:{m}" for c, _, m in BAD_OPTIONS],
+)
+def test_a_bad_option_value_is_exit_2_on_every_command(
+    tmp_path: Path, command: str, argv: list[str], message: str
+) -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "analyzer", command, *argv],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        cwd=tmp_path,  # nothing may be written: the folder stays empty
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert message in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.stdout == "" and list(tmp_path.iterdir()) == []

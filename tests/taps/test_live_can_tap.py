@@ -14,7 +14,7 @@ import pytest
 from can.interfaces.virtual import VirtualBus
 from tap_helpers import Collector as BaseCollector
 
-from analyzer.model import ERROR, INFO, WARNING
+from analyzer.model import INFO, WARNING
 from analyzer.sources.can_tap import CanTap, listen_only_plan, parse_ip_link_details
 from analyzer.sources.live import TapQueue
 from decoders.model import CanFrame
@@ -112,7 +112,7 @@ def test_virtual_bus_frames_captured_and_tap_never_sends(
     _no_tracebacks(capsys, caplog)
 
 
-def test_open_fails_then_retries(
+def test_open_fails_then_retries_with_wait(
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
     caplog: pytest.LogCaptureFixture,
@@ -128,19 +128,20 @@ def test_open_fails_then_retries(
 
     monkeypatch.setattr(can, "Bus", flaky)
     sender = VirtualBus(channel=ch)
-    tap = CanTap("can1", "virtual", ch, retry_interval=RETRY)
+    tap = CanTap("can1", "virtual", ch, retry_interval=RETRY, wait=True)
     q = TapQueue()
     c = Collector(q)
     tap.start(q)
     try:
+        assert tap.first_open() is None  # waited for: not a failure
         err = c.wait_event("open")
-        assert err.level == ERROR
+        assert err.level == WARNING
         assert err.message == (
-            f"cannot open virtual channel {ch}: CanInitializationError: no such adapter; "
-            "retrying with back-off from 0.05 s up to 5 s"
+            f"waiting for virtual channel {ch} (CanInitializationError: no such adapter; "
+            "retrying with back-off from 0.05 s up to 5 s)"
         )
         ok = c.wait_event("open", 2)
-        assert ok.level == INFO and "retries" in ok.message
+        assert ok.level == INFO and "after waiting" in ok.message
         assert len(attempts) == 4
         assert attempts[-1]["receive_own_messages"] is False
         assert "bitrate" not in attempts[-1]

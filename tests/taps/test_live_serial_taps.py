@@ -13,7 +13,7 @@ import pytest
 from tap_helpers import Collector as BaseCollector
 from tap_helpers import Pty
 
-from analyzer.model import ERROR, INFO, WARNING, Item
+from analyzer.model import INFO, WARNING, Item
 from analyzer.sources.live import TapQueue
 from analyzer.sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
 from decoders.model import Chunk
@@ -224,23 +224,23 @@ def test_unplug_and_replug(
     _no_tracebacks(capsys, caplog)
 
 
-def test_port_missing_at_start_then_appears(
+def test_port_missing_at_start_is_waited_for_with_wait(
     ptys: Callable[[], Pty],
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     path = tmp_path / "ttyUSB0"
-    tap = SerialTap("rs485", str(path), retry_interval=RETRY)
+    tap = SerialTap("rs485", str(path), retry_interval=RETRY, wait=True)
     q = TapQueue()
     c = Collector(q)
     tap.start(q)
     try:
+        assert tap.first_open() is None  # waited for: not a failure
         err = c.wait_event("open")
-        assert err.level == ERROR
+        assert err.level == WARNING
         assert err.message == (
-            f"cannot open {path}: [Errno 2] No such file or directory; "
-            "retrying with back-off from 0.05 s up to 5 s"
+            f"waiting for {path} (no such port; retrying with back-off from 0.05 s up to 5 s)"
         )
         time.sleep(4 * RETRY)
         c.pump()
@@ -248,7 +248,7 @@ def test_port_missing_at_start_then_appears(
         p = ptys()
         path.symlink_to(p.name)
         ok = c.wait_event("open", 2)
-        assert ok.level == INFO and "retries" in ok.message
+        assert ok.level == INFO and "after waiting" in ok.message
         p.write(b"\x01\x02\x03")
         c.wait_bytes(3)
         assert c.data() == b"\x01\x02\x03"
@@ -258,7 +258,8 @@ def test_port_missing_at_start_then_appears(
 
 
 def test_stop_while_retrying_is_quick(tmp_path: Path) -> None:
-    tap = SerialPairTap("rs232", [str(tmp_path / "a"), str(tmp_path / "b")], retry_interval=0.5)
+    ports = [str(tmp_path / "a"), str(tmp_path / "b")]
+    tap = SerialPairTap("rs232", ports, retry_interval=0.5, wait=True)
     q = TapQueue()
     c = Collector(q)
     tap.start(q)
