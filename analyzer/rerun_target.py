@@ -244,10 +244,10 @@ class RerunOutput:
         the browser reads it from the server), then stop the server."""
         if self.server is None:
             return
-        from .session import _signals_as_interrupt  # SIGTERM and SIGHUP as Ctrl-C
+        from .session import signals_as_interrupt  # SIGTERM and SIGHUP as Ctrl-C
 
         try:
-            with _signals_as_interrupt():
+            with signals_as_interrupt():
                 while self.server.poll() is None:
                     time.sleep(0.2)
         except KeyboardInterrupt:
