@@ -442,9 +442,7 @@ class PythonCanFileReader(_FileReaderBase):
                         return
                     continue
                 if not feed.failed(exc):
-                    self._error(
-                        f"{self.path.name}: cannot read past line {feed.number}: {_exc_text(exc)}"
-                    )
+                    self._error(f"cannot read past line {feed.number}: {_exc_text(exc)}")
                     break
                 self._reader = self._reader_type(feed, **self._kwargs)
         feed.finish()
@@ -453,10 +451,7 @@ class PythonCanFileReader(_FileReaderBase):
         for text in self._held or ():
             self._error(text)
         if feed.read_error is not None:
-            self._error(
-                f"{self.path.name}: read error after line {feed.number}: "
-                f"{_exc_text(feed.read_error)}"
-            )
+            self._error(f"read error after line {feed.number}: {_exc_text(feed.read_error)}")
 
     def _line_error(self, text: str) -> None:
         """A line that is no frame: damage, or (before any frame) a sign the file is no log."""
@@ -490,7 +485,7 @@ class PythonCanFileReader(_FileReaderBase):
             return False
         self._relative = True
         self._warning(
-            f"{self.path.name}: timestamps are relative to the start of the capture "
+            f"timestamps are relative to the start of the capture "
             f"(cannot read its start date: {exc})"
         )
         return True
@@ -514,10 +509,10 @@ class PythonCanFileReader(_FileReaderBase):
         except StopIteration:
             pass
         except Exception as exc:
-            self._error(f"{self.path.name}: damaged after {self.frames} frames: {_exc_text(exc)}")
+            self._error(f"damaged after {self.frames} frames: {_exc_text(exc)}")
             return
         for level, text in notes:  # logged after the last frame
-            self._note(level, f"{self.path.name}: {text}")
+            self._note(level, f"{text}")
         if self.suffix == ".blf":
             self._check_blf()
 
@@ -555,8 +550,7 @@ class PythonCanFileReader(_FileReaderBase):
         if getattr(self._reader, "start_time", None) == 0.0:
             self._relative = True
             self._warning(
-                f"{self.path.name}: timestamps are relative to the start of the capture "
-                "(no start date in the file)"
+                f"timestamps are relative to the start of the capture (no start date in the file)"
             )
 
     def _check_blf(self) -> None:
@@ -567,16 +561,16 @@ class PythonCanFileReader(_FileReaderBase):
         actual = self.path.stat().st_size
         if stated == BLF_HEADER_SIZE and actual > stated:
             self._warning(
-                f"{self.path.name}: the writer did not finish the file (its header was never "
+                f"the writer did not finish the file (its header was never "
                 "updated); read what is there"
             )
         elif actual < stated:
             self._error(
-                f"{self.path.name}: file truncated: its header states {stated} bytes, the file "
+                f"file truncated: its header states {stated} bytes, the file "
                 f"has {actual}; frames after the cut are lost"
             )
         elif not _blf_padding(getattr(reader, "_tail", b"")):
-            self._error(f"{self.path.name}: the last object is incomplete")
+            self._error(f"the last object is incomplete")
 
 
 def _blf_padding(tail: bytes) -> bool:

@@ -123,7 +123,7 @@ class GzipBytesReader(CaptureReader):
                 yield Item(bus, Chunk(data))
         except (OSError, EOFError, zlib.error) as exc:
             self.errors.append(
-                f"{self.path.name}: compressed data damaged or cut short after {total} bytes "
+                f"compressed data damaged or cut short after {total} bytes "
                 f"({type(exc).__name__}: {exc}); the rest is lost"
             )
         self.position = self.size

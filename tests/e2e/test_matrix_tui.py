@@ -40,7 +40,6 @@ def stored_by_bus(app: Eg2ScopeApp) -> dict[str, list[dict[str, Any]]]:
 async def replayed(path: Path) -> tuple[Eg2ScopeApp, list[Session], list[BaseException]]:
     """``eg2scope tui PATH``'s app, run until its session thread has ended (or failed)."""
     failures: list[BaseException] = []
-    ended: list[Session] = []
 
     def watch(message: Any) -> None:
         if isinstance(message, Worker.StateChanged) and message.state == WorkerState.ERROR:
@@ -48,18 +47,18 @@ async def replayed(path: Path) -> tuple[Eg2ScopeApp, list[Session], list[BaseExc
 
     with ExitStack() as stack:
         plan = capture_plan(build_parser().parse_args(["tui", str(path)]), stack)
-        plan.on_done.append(ended.append)
         app = Eg2ScopeApp(plan)
         try:
             async with app.run_test(size=SIZE, message_hook=watch) as pilot:
                 waited = 0.0
-                while not failures and not (ended and app.done) and waited < TIMEOUT_S:
+                while not failures and not app.done and waited < TIMEOUT_S:
                     await pilot.pause(0.1)
                     waited += 0.1
                 await pilot.press("q")
         finally:
             if app.session is not None:
                 app.session.stop()
+    ended = [app.session] if app.done and app.session is not None else []
     return app, ended, failures
 
 
