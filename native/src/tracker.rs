@@ -179,7 +179,7 @@ pub struct Changed {
 }
 
 impl Changed {
-    fn add(&mut self, field: usize) {
+    pub(crate) fn add(&mut self, field: usize) {
         let field = field as u8;
         if !self.keys[..self.len as usize].contains(&field) {
             self.keys[self.len as usize] = field;
