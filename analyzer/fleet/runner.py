@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import importlib
 import logging
 import os
 import time
@@ -20,9 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-import pyarrow.dataset as ds
-
-from ..sources.capture import CAPTURE_READERS, RAW_BYTES
 from . import layout
 from .capture_task import (
     DAMAGED,
@@ -74,6 +70,8 @@ def _known(root: Path) -> dict[tuple[str, int, int], str]:
     files = sorted((root / layout.CAPTURES).glob("day=*/*.parquet"))
     if not files:
         return {}
+    import pyarrow.dataset as ds  # 0.1 s to import: only for a dataset that holds captures
+
     columns = [PATH, HASH, "size", "mtime"]
     table = ds.dataset([str(f) for f in files], format="parquet").to_table(columns=columns)
     table = table.set_column(3, "mtime", table.column("mtime").cast("int64"))
@@ -100,20 +98,11 @@ def run_in_loop(
 ) -> None:
     """Every capture in this process, one after the other (no Dask needed); ``interrupted``
     is asked before each capture and between its batches (KeyboardInterrupt when it says so)."""
-    _import_readers()
     for job in jobs:
         if interrupted():
             raise KeyboardInterrupt
         told = None if progress is None else functools.partial(progress, job.path)
         report(decode_capture(job, told, interrupted))
-
-
-def _import_readers() -> None:
-    """Import every capture reader now, not at its format's first file: CPython 3.11 takes a
-    Ctrl-C that lands inside an import's generated code (dataclasses) as unhandled and ends
-    the process by SIGINT at exit, even though the batch handled it and said so."""
-    for target in {*CAPTURE_READERS.values(), RAW_BYTES}:
-        importlib.import_module(target.partition(":")[0])
 
 
 def decode_on_worker(job: CaptureJob) -> CaptureResult:

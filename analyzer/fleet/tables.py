@@ -8,9 +8,11 @@ and readers (pyarrow datasets, DuckDB, polars with ``hive_partitioning``) add th
 from __future__ import annotations
 
 import datetime as dt
+import math
 from collections.abc import Callable, Sequence
 from typing import Any, Final
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
@@ -79,6 +81,11 @@ STATES_SCHEMA: Final = pa.schema(
     metadata={b"eg2scope": b"fleet states"},
 )
 _STATE_KEYS: Final = [f.name for f in STATES_SCHEMA if f.name not in (PATH, HASH)]
+#: the states/ columns written dictionary-encoded: a gripper's values repeat from sample to
+#: sample (half the size, and faster to write); times, seqs, latencies and counters do not
+STATE_DICTIONARY: Final = tuple(
+    k for k in _STATE_KEYS if k not in ("t", "seq", "latency_ms", "frames", "errors", "unanswered")
+)
 _TYPES_SCHEMA: Final = pa.schema(
     [pa.field(BUS, STR), *(STATES_SCHEMA.field(k) for k in _STATE_KEYS)]
 )
@@ -143,17 +150,35 @@ def utc_day(t: float) -> str:
     return dt.datetime.fromtimestamp(t, dt.UTC).strftime("%Y-%m-%d")
 
 
-# the times a day can be told of (0001-01-01 to 9999-12-31 UTC); others are no clock's
-_FIRST_S: Final = -62_135_596_800.0
-_END_S: Final = 253_402_300_800.0
+# the times a day can be told of (0001-01-01 to 9999-12-31 UTC); others are no clock's.
+# Scalars for compute functions are made once, typed: pyarrow infers the type of a Python
+# value anew at every call (and tries to import dateutil each time)
+_FIRST_S: Final = pa.scalar(-62_135_596_800.0, FLOAT)
+_END_S: Final = pa.scalar(253_402_300_800.0, FLOAT)
+_MICRO: Final = pa.scalar(1e6, FLOAT)
+_NO_TIME: Final = pa.scalar(None, FLOAT)
 
 
-def days(t: pa.ChunkedArray | pa.Array, fallback: str) -> pa.Array | pa.ChunkedArray:
+def days(t: pa.ChunkedArray | pa.Array, fallback: str) -> str | pa.Array | pa.ChunkedArray:
     """Each row's UTC day from its time in seconds (rounded to the microsecond, as
     ``datetime.fromtimestamp`` does); ``fallback`` where there is no time, or one no calendar
-    holds (NaN, infinite, beyond year 9999)."""
+    holds (NaN, infinite, beyond year 9999). One string when every row has the same day (the
+    usual batch: its first and last times fall on one day)."""
+    if t.null_count == len(t):
+        return fallback
+    if not t.null_count and math.isfinite(pc.sum(t).as_py()):  # no NaN nor infinity
+        first, last = pc.min_max(t).values()
+        ends = _days(pa.array([first.as_py(), last.as_py()], FLOAT), fallback).to_pylist()
+        if ends[0] == ends[1] != fallback:
+            return str(ends[0])
+    return _days(t, fallback)
+
+
+def _days(t: pa.ChunkedArray | pa.Array, fallback: str) -> pa.Array | pa.ChunkedArray:
     inside = pc.and_(pc.greater_equal(t, _FIRST_S), pc.less(t, _END_S))
-    micros = pc.round(pc.multiply(pc.if_else(inside, t, None), 1e6), round_mode="half_to_even")
+    micros = pc.round(
+        pc.multiply(pc.if_else(inside, t, _NO_TIME), _MICRO), round_mode="half_to_even"
+    )
     stamps = pc.cast(pc.cast(micros, INT), pa.timestamp("us", "UTC"))
     text = pc.cast(pc.cast(stamps, pa.date32()), STR)  # ISO 8601: YYYY-MM-DD
     return pc.fill_null(text, fallback)
@@ -211,8 +236,26 @@ def _words(
 
 def with_source(table: pa.Table, path: str, content_hash: str) -> pa.Table:
     rows = table.num_rows
-    table = table.append_column(_SOURCE[0], pa.repeat(path, rows).cast(STR))
-    return table.append_column(_SOURCE[1], pa.repeat(content_hash, rows).cast(STR))
+    table = table.append_column(_SOURCE[0], _repeated(path, rows))
+    return table.append_column(_SOURCE[1], _repeated(content_hash, rows))
+
+
+_REPEATED: dict[str, pa.Array] = {}
+
+
+def _repeated(text: str, rows: int) -> pa.Array:
+    """``text`` on every row: a slice of one array per text (a capture's path and hash), made
+    from its bytes (converting Python objects looks for optional libraries every time)."""
+    array = _REPEATED.get(text)
+    if array is None or len(array) < rows:
+        if len(_REPEATED) > 4:
+            _REPEATED.clear()  # the captures before
+        size = max(rows, 1 << 16)
+        data = text.encode()
+        offsets = np.arange(0, (size + 1) * len(data), len(data), dtype=np.int32)
+        buffers = [None, pa.py_buffer(offsets), pa.py_buffer(data * size)]
+        array = _REPEATED[text] = pa.Array.from_buffers(STR, size, buffers)
+    return array.slice(0, rows)
 
 
 def captures_table(row: dict[str, Any]) -> pa.Table:

@@ -18,7 +18,7 @@
 //! most rows, and a column with no value in a batch is handed out as "all null", with no
 //! buffer at all.
 
-use crate::arrow_states::StateColumns;
+use crate::arrow_states::{Row, StateColumns};
 use crate::json::{push_map, push_str, push_value};
 use crate::model::{Record, Value};
 use crate::tracker::Tracker;
@@ -292,6 +292,17 @@ impl Column {
         match v {
             Some(v) => self.push_int(v),
             None => self.push_null(),
+        }
+    }
+
+    /// A list of strings, from an iterator (no list in between).
+    pub(crate) fn push_strs<'a>(&mut self, items: impl Iterator<Item = &'a str>) {
+        if let Data::List { offsets, child } = &mut self.data {
+            for s in items {
+                child.push_str(s);
+            }
+            offsets.push(child.len as i32);
+            self.mark_valid();
         }
     }
 
@@ -825,10 +836,19 @@ impl ArrowTables {
     fn push(&mut self, rec: &Record) {
         self.records.push(rec);
         if let Some((tracker, columns)) = &mut self.states {
-            if let Some(sample) = tracker.update(rec) {
-                if let Err(why) = columns.push(&sample) {
-                    self.failure.get_or_insert(why);
-                }
+            let pushed = tracker.update_with(rec, |state, changed| {
+                columns.push_row(&Row {
+                    t: rec.t,
+                    bus: &rec.bus,
+                    device: state.device,
+                    protocol: state.protocol,
+                    seq: rec.seq,
+                    values: &state.values,
+                    changed,
+                })
+            });
+            if let Some(Err(why)) = pushed {
+                self.failure.get_or_insert(why);
             }
         }
     }

@@ -11,7 +11,7 @@
 //! refuses too, a bool for an int; the decoders give none).
 
 use crate::arrow::{is_str_list, Buffers, Column, ColumnSpec, Type};
-use crate::tracker::{Sample, Slot, SLOTS, VALUE_KEYS};
+use crate::tracker::{Changed, Sample, Slot, Values, SLOTS, VALUE_KEYS};
 
 /// What a column holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,6 +44,17 @@ impl Field {
             }
         })
     }
+}
+
+/// A state sample's parts: its record's time, bus and seq, its gripper's state after it.
+pub struct Row<'a> {
+    pub t: Option<f64>,
+    pub bus: &'a str,
+    pub device: i64,
+    pub protocol: &'static str,
+    pub seq: i64,
+    pub values: &'a Values,
+    pub changed: Changed,
 }
 
 /// A batch of state samples as columns.
@@ -87,20 +98,34 @@ impl StateColumns {
     /// One sample as one row; an error (naming the column) for a value its column's type does
     /// not take. A row that fails is not held.
     pub fn push(&mut self, s: &Sample) -> Result<(), String> {
+        let row = Row {
+            t: s.t,
+            bus: &s.bus,
+            device: s.device,
+            protocol: s.protocol,
+            seq: s.seq,
+            values: &s.values,
+            changed: s.changed,
+        };
+        self.push_row(&row)
+    }
+
+    /// `push` of a sample's parts (a Tracker's state, as `Tracker::update_with` gives it).
+    pub fn push_row(&mut self, s: &Row<'_>) -> Result<(), String> {
         for (field, col) in &self.columns {
-            if let Field::Value(i) = field {
-                if *i < SLOTS && !fits(&s.values.slots[*i], col.ty) {
-                    let value = &s.values.slots[*i];
+            if let Field::Value(i) = *field {
+                if i < SLOTS && !fits(&s.values.slots[i], col.ty) {
+                    let value = &s.values.slots[i];
                     return Err(format!(
                         "state value {} = {value:?} does not fit its column ({:?})",
-                        VALUE_KEYS[*i], col.ty
+                        VALUE_KEYS[i], col.ty
                     ));
                 }
             }
         }
         for (field, col) in &mut self.columns {
             match *field {
-                Field::Bus => col.push_str(&s.bus),
+                Field::Bus => col.push_str(s.bus),
                 Field::T => match s.t {
                     Some(t) => col.push_raw_float(t),
                     None => col.push_null(),
@@ -114,10 +139,7 @@ impl StateColumns {
                     1 => s.values.errors,
                     _ => s.values.unanswered,
                 }),
-                Field::Changed => {
-                    let names: Vec<&str> = s.changed.iter().map(|f| VALUE_KEYS[f]).collect();
-                    col.push_str_list(&names);
-                }
+                Field::Changed => col.push_strs(s.changed.iter().map(|f| VALUE_KEYS[f])),
             }
         }
         self.rows += 1;
@@ -160,7 +182,6 @@ fn push_slot(col: &mut Column, slot: &Slot) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tracker::{Changed, Values};
     use std::sync::Arc;
 
     fn columns() -> StateColumns {
