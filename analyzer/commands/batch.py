@@ -43,7 +43,7 @@ def add_subparser(sub: Any) -> None:
                 "exit status: 0 every capture decoded; 1 a capture could not be read or "
                 "written (the others are in the dataset); 2 usage error; 3 some capture is "
                 "damaged (decoded as far as possible, marked in captures/); 130 interrupted "
-                "(run again to finish)",
+                "by Ctrl-C, SIGTERM or SIGHUP (run again to finish)",
                 width=88,
             )
         ),
@@ -119,7 +119,9 @@ def _check(args: argparse.Namespace) -> None:
             "or run it in one process with --workers 1"
         )
     if args.engine == "native" and not native.available():
-        raise UsageError(f"--engine native: the {native.status()}; use --engine auto or python")
+        raise UsageError(
+            f"--engine native: the native core is {native.WHY_NOT}; use --engine auto or python"
+        )
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise UsageError(f"the output {args.output} is a file; batch writes a dataset folder")

@@ -26,6 +26,7 @@ The machine is shared: the figures are medians of rounds whose commands run side
 from __future__ import annotations
 
 import argparse
+import resource
 import shutil
 import statistics
 import subprocess
@@ -84,7 +85,7 @@ def _mcap(path: Path, frames: int, seed: int) -> None:
     from analyzer.sources.capture import open_capture
     from analyzer.sources.source import CaptureSource
 
-    staging = path.with_suffix(".log")
+    staging = path.with_name(path.stem + "-source.log")
     _candump(staging, frames, seed)
     reader = open_capture(staging)
     with reader, McapRecorder(path, {"passive": "yes"}) as recorder:
@@ -119,13 +120,17 @@ def capture(folder: Path, kind: str, frames: int, seed: int = 1) -> Path:
     return path
 
 
-def timed(argv: list[str], ok: tuple[int, ...] = (0,)) -> tuple[float, str]:
+def timed(argv: list[str]) -> tuple[float, float, str]:
+    """Run a command: its wall-clock seconds, its CPU seconds (all its threads), its stdout."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     done = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, check=False)
     seconds = time.perf_counter() - start
-    if done.returncode not in ok:
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    if done.returncode != 0:
         raise SystemExit(f"{' '.join(argv)} failed ({done.returncode}): {done.stderr}")
-    return seconds, done.stdout
+    return seconds, cpu, done.stdout
 
 
 def records_in(summary: str) -> int:
@@ -137,34 +142,39 @@ def records_in(summary: str) -> int:
 
 def per_capture(args: argparse.Namespace) -> None:
     folder = args.out / f"kinds_{args.frames}"
-    print(f"per capture: {args.frames:,} frames of each kind in {folder}")
+    print(f"per capture: {args.frames:,} frames of each kind in {folder}; median of {args.runs}")
+    print("  (wall-clock seconds; CPU seconds of all threads in brackets: on a shared machine")
+    print("   the CPU ratio is the steadier one)")
     for kind in args.kinds:
         path = capture(folder, kind, args.frames)
-        decode_s, batch_s = [], []
+        runs: dict[str, list[tuple[float, float]]] = {"decode": [], "batch": []}
         records = 0
         for _ in range(args.runs):
             out = args.out / "decoded.parquet"
-            seconds, _ = timed([*CLI, "decode", str(path), "-f", "parquet", "-o", str(out)])
-            decode_s.append(seconds)
+            wall, cpu, _ = timed([*CLI, "decode", str(path), "-f", "parquet", "-o", str(out)])
+            runs["decode"].append((wall, cpu))
             dataset = args.out / "dataset"
             shutil.rmtree(dataset, ignore_errors=True)
             argv = [*CLI, "batch", str(path), "-o", str(dataset), "--workers", "1"]
-            seconds, summary = timed([*argv, "--no-progress"])
-            batch_s.append(seconds)
+            wall, cpu, summary = timed([*argv, "--no-progress"])
+            runs["batch"].append((wall, cpu))
             records = records_in(summary)
-        decode, batch = statistics.median(decode_s), statistics.median(batch_s)
+        (decode, decode_cpu), (batch, batch_cpu) = (
+            (statistics.median(w for w, _ in r), statistics.median(c for _, c in r))
+            for r in (runs["decode"], runs["batch"])
+        )
         ratio = batch / decode
         verdict = "ok" if ratio <= MUST_RATIO else f"MISSED (target <= {MUST_RATIO})"
         print(
-            f"  {kind:8} {records:>9,} records  decode --format parquet {decode:6.2f} s  "
-            f"batch --workers 1 {batch:6.2f} s  ({records / batch:9,.0f} records/s)  "
-            f"batch/decode {ratio:.2f}x  {verdict}"
+            f"  {kind:8} {records:>9,} records  decode --format parquet {decode:6.2f} s "
+            f"[{decode_cpu:5.2f}]  batch --workers 1 {batch:6.2f} s [{batch_cpu:5.2f}]  "
+            f"batch/decode {ratio:.2f}x [{batch_cpu / decode_cpu:.2f}x]  {verdict}"
         )
 
 
 def run_batch(folder: Path, dataset: Path, *options: str) -> tuple[float, int]:
     shutil.rmtree(dataset, ignore_errors=True)
-    seconds, summary = timed(
+    seconds, _cpu, summary = timed(
         [*CLI, "batch", "--no-progress", str(folder), "-o", str(dataset), *options]
     )
     return seconds, records_in(summary)

@@ -14,7 +14,7 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
-from analyzer import cli
+from analyzer import cli, native
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import content_hash, expand
 from analyzer.listener import Listener
@@ -272,3 +272,22 @@ def test_inputs_are_never_changed(
     root = fleet["candump"].parents[2]
     assert batch(capsys, str(root), "-o", str(tmp_path / "d"), "--workers", "1")[0] == 1
     assert snapshot() == before
+
+
+def test_engine_native_without_the_core_is_a_usage_error(
+    fleet: dict[str, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(native, "_native", None)  # as on a machine without Rust
+    monkeypatch.setattr(native, "WHY_NOT", "not built: no Rust toolchain at install time")
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["batch", str(fleet["candump"]), "-o", str(tmp_path / "d"), "--engine", "native"])
+    assert exit_.value.code == 2
+    assert "--engine native: the native core is not built" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+    # the default goes on in Python, with the same dataset as the native core's (elsewhere)
+    code = cli.main(["batch", str(fleet["candump"]), "-o", str(tmp_path / "d"), "--workers", "1"])
+    assert code == 0
+    assert layout.done_hashes(tmp_path / "d") == {content_hash(fleet["candump"])}
