@@ -28,6 +28,7 @@ def noted_interrupts() -> Iterator[list[int]]:
     def note(signum: int, frame: Any) -> None:
         noted.append(signum)
 
+    _NOTING.add(note)
     wanted = [signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)]
     previous = {sig: signal.signal(sig, note) for sig in wanted if sig is not None}
     try:
@@ -35,3 +36,13 @@ def noted_interrupts() -> Iterator[list[int]]:
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
+        _NOTING.discard(note)
+
+
+def notes(signum: int) -> bool:
+    """Whether ``signum`` is being noted (by ``noted_interrupts``): code that would raise it
+    leaves it to the one noting, which acts on it at its own steps."""
+    return signal.getsignal(signum) in _NOTING
+
+
+_NOTING: set[Any] = set()  # the handlers of the noted_interrupts in force

@@ -27,6 +27,7 @@ from typing import Any
 
 from decoders.model import Record
 
+from . import interrupts
 from .batches import error_count, session_engine
 from .listener import Listener
 from .model import ERROR, SourceEvent
@@ -272,8 +273,10 @@ def _signals_as_interrupt() -> Iterator[None]:
     def handler(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt
 
-    wanted = [signal.SIGTERM, getattr(signal, "SIGHUP", None)]
-    previous = {sig: signal.signal(sig, handler) for sig in wanted if sig is not None}
+    present = [sig for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)) if sig is not None]
+    # a caller that notes them itself (eg2scope batch) stops the session at its own steps
+    wanted = [sig for sig in present if not interrupts.notes(sig)]
+    previous = {sig: signal.signal(sig, handler) for sig in wanted}
     try:
         yield
     finally:

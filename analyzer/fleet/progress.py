@@ -38,9 +38,9 @@ class BatchProgress(Running):
         self.console = Console(stderr=True, highlight=False)
         self.progress = Progress(
             TextColumn("[bold]captures {task.fields[captures]}"),
-            BarColumn(),
+            BarColumn(bar_width=20),  # the whole line fits 80 columns
             DownloadColumn(),
-            TextColumn("{task.fields[records]:>12,} records  {task.fields[rate]:>9,.0f}/s"),
+            TextColumn("{task.fields[records]:,} records {task.fields[rate]:,.0f}/s"),
             TextColumn("{task.fields[errors]:,} errors"),
             TimeElapsedColumn(),
             console=self.console,

@@ -20,18 +20,21 @@ from analyzer import cli
 from analyzer.fleet import layout
 
 
-@pytest.fixture
-def ctrl_c_in_the_collector(tmp_path: Path) -> Iterator[list[float]]:
+@pytest.fixture(params=[signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def ctrl_c_in_the_collector(
+    tmp_path: Path, request: pytest.FixtureRequest
+) -> Iterator[list[float]]:
     """At the first garbage collection once the batch has started (its lock file is there),
-    a Ctrl-C arrives while the collector runs a callback: a KeyboardInterrupt raised there is
-    lost. The list gets the time it was sent."""
+    a Ctrl-C (or SIGTERM, which a session would raise as one) arrives while the collector runs
+    a callback: a KeyboardInterrupt raised there is lost. The list gets the time it was sent."""
+    signum = request.param
     sent: list[float] = []
     lock = tmp_path / "d" / layout.LOCK_NAME
 
     def callback(phase: str, info: dict[str, Any]) -> None:
         if phase == "start" and not sent and lock.exists():
             sent.append(time.monotonic())
-            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signum)
             time.sleep(0.01)  # Python runs the signal's handler here
 
     gc.callbacks.append(callback)

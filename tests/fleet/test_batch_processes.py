@@ -20,6 +20,10 @@ from fleet_folder import make_fleet
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import content_hash
 
+# real processes, Dask clusters started and stopped, runs done twice: on a busy machine this
+# takes longer than the unit tests' limit
+pytestmark = pytest.mark.timeout(300)
+
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "COLUMNS": "120"}
 BATCH = [sys.executable, "-m", "analyzer", "batch"]
@@ -146,6 +150,21 @@ def test_interrupted_then_resumed_redoes_nothing_and_duplicates_nothing(
     assert summary_count(again.stdout, "decoded") == len(fleet) - len(done)
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # nothing redone
     assert_complete_without_duplicates(root, fleet)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_interrupt_it_too(
+    signum: signal.Signals, fleet: list[Path], tmp_path: Path
+) -> None:
+    root = tmp_path / "d"
+    proc = start(*map(str, fleet), "-o", str(root), "--workers", "1")
+    wait_for(lambda: writing(root))
+    proc.send_signal(signum)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "run the same command again to finish the rest" in err
+    assert len(layout.done_hashes(root)) < len(fleet)
+    assert not list(layout.stale_temporaries(root))
 
 
 def test_the_local_cluster_listens_on_localhost_only(fleet: list[Path], tmp_path: Path) -> None:

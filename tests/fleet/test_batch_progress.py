@@ -22,7 +22,6 @@ pyte = pytest.importorskip("pyte")
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[2]
-COLUMNS, LINES = 120, 30
 T0 = 1_763_700_000.0
 BAR = re.compile(r"captures (\d+)/(\d+) .*?([\d.]+)/([\d.]+) (k?B|MB|GB)")
 
@@ -48,17 +47,17 @@ def big(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
 
 
 def watch(
-    argv: list[str], timeout: float = 300.0
+    argv: list[str], columns: int, lines: int, timeout: float = 300.0
 ) -> tuple[list[tuple[int, int, float, float]], int]:
-    """Run ``argv`` in a pseudo-terminal; every state of the bar seen (captures done, captures,
-    bytes read, bytes in all) and the exit status."""
-    screen = pyte.Screen(COLUMNS, LINES)
+    """Run ``argv`` in a pseudo-terminal of that size; every state of the bar seen (captures
+    done, captures, bytes read, bytes in all) and the exit status."""
+    screen = pyte.Screen(columns, lines)
     stream = pyte.ByteStream(screen)
     child = pexpect.spawn(
         argv[0],
         argv[1:],
         cwd=str(ROOT),
-        dimensions=(LINES, COLUMNS),
+        dimensions=(lines, columns),
         env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT)},
     )
     seen: list[tuple[int, int, float, float]] = []
@@ -85,10 +84,12 @@ def moved_within_a_capture(seen: list[tuple[int, int, float, float]]) -> bool:
     return any(done == 0 and 0 < read < total for done, _, read, total in seen)
 
 
-@pytest.mark.parametrize("workers", ["1", "2"])
-def test_the_bar_moves_within_a_capture(workers: str, big: list[Path], tmp_path: Path) -> None:
+@pytest.mark.parametrize(("workers", "size"), [("1", (80, 24)), ("2", (200, 50))])
+def test_the_bar_moves_within_a_capture(
+    workers: str, size: tuple[int, int], big: list[Path], tmp_path: Path
+) -> None:
     argv = [sys.executable, "-m", "analyzer", "batch", *map(str, big), "-o", str(tmp_path / "d")]
-    seen, status = watch([*argv, "--workers", workers, "--dashboard-address", "none"])
+    seen, status = watch([*argv, "--workers", workers, "--dashboard-address", "none"], *size)
     assert status == 0
     assert moved_within_a_capture(seen), seen
     assert len({read for _, _, read, _ in seen}) >= 3, seen  # it moved, more than once
