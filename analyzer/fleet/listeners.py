@@ -99,14 +99,15 @@ PROGRESS_S = 0.1
 
 
 class Throttled:
-    """``progress`` called at most every ``PROGRESS_S``."""
+    """``progress`` called at most every ``seconds``."""
 
-    def __init__(self, progress: Progress) -> None:
+    def __init__(self, progress: Progress, seconds: float = PROGRESS_S) -> None:
         self.progress = progress
+        self.seconds = seconds
         self.due = 0.0
 
     def __call__(self, position: int, records: int) -> None:
         now = time.monotonic()
         if now >= self.due:
-            self.due = now + PROGRESS_S
+            self.due = now + self.seconds
             self.progress(position, records)

@@ -12,7 +12,9 @@ from ..sinks.parquet import RowGroupWriter
 from . import layout
 from .tables import BUS, HASH, PATH, STATE_DICTIONARY, days
 
-_KEY_SEPARATOR = "\x00"  # between day and bus in a row's partition key (in neither)
+# between day and bus in a row's partition key (in neither); scalars typed, as pyarrow would
+# infer a Python value's type at every call
+_KEY_SEPARATOR = pa.scalar("\x00", pa.string())
 
 
 class PartitionFiles:
@@ -43,11 +45,11 @@ class PartitionFiles:
             self._writer(table_name, schema, day, first).add(rest)
             return
         if isinstance(day, str):
-            day = pa.repeat(day, table.num_rows).cast(pa.string())
+            day = pa.repeat(pa.scalar(day, pa.string()), table.num_rows)
         key = pc.binary_join_element_wise(day, bus, _KEY_SEPARATOR)
         for value in pc.unique(key).to_pylist():
-            part = rest.filter(pc.equal(key, value))
-            day_of, bus_of = value.split(_KEY_SEPARATOR)
+            part = rest.filter(pc.equal(key, pa.scalar(value, pa.string())))
+            day_of, bus_of = value.split(_KEY_SEPARATOR.as_py())
             self._writer(table_name, schema, day_of, bus_of).add(part)
 
     def _writer(self, table_name: str, schema: pa.Schema, day: str, bus: str) -> RowGroupWriter:

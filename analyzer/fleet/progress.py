@@ -34,6 +34,7 @@ class BatchProgress(Running):
         self.sizes = sizes
         self.done_bytes = 0
         self.running: dict[str, tuple[int, int]] = {}  # path -> (bytes read, records)
+        self.finished: set[str] = set()
         self.lock = threading.Lock()  # Dask's events come on its client's thread
         self.console = Console(stderr=True, highlight=False)
         self.progress = Progress(
@@ -68,13 +69,14 @@ class BatchProgress(Running):
     def capture_progress(self, path: str, position: int, records: int) -> None:
         """A capture being decoded has read ``position`` bytes of its file into ``records``."""
         with self.lock:
-            if path in self.sizes:
+            if path in self.sizes and path not in self.finished:  # (a worker's late event)
                 self.running[path] = (min(position, self.sizes[path]), records)
                 self._update()
 
     def report(self, result: CaptureResult) -> None:
         with self.lock:
             self.tally.add(result)
+            self.finished.add(result.path)
             self.running.pop(result.path, None)
             self.done_bytes += self.sizes.get(result.path, 0)
             if result.status in _STYLE:

@@ -29,6 +29,7 @@ from .capture_task import (
     CaptureResult,
     decode_capture,
 )
+from .listeners import Throttled
 from .tables import HASH, PATH
 
 Report = Callable[[CaptureResult], None]
@@ -88,6 +89,8 @@ CaptureProgress = Callable[[str, int, int], None]
 PROGRESS_TOPIC: Final = "eg2scope-batch-progress"
 #: seconds between two looks at a Ctrl-C while waiting for Dask's results
 POLL_S: Final = 0.05
+#: seconds between two progress events of a Dask worker
+WORKER_PROGRESS_S: Final = 0.5
 
 
 def run_in_loop(
@@ -114,7 +117,8 @@ def decode_on_worker(job: CaptureJob) -> CaptureResult:
     def progress(position: int, records: int) -> None:
         worker.log_event(PROGRESS_TOPIC, [job.path, position, records])
 
-    return decode_capture(job, progress)
+    # through the scheduler: twice a second per worker is enough for a bar
+    return decode_capture(job, Throttled(progress, WORKER_PROGRESS_S))
 
 
 def run_on_dask(
