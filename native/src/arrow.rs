@@ -93,6 +93,19 @@ impl Bits {
         self.len += 1;
     }
 
+    /// `n` one bits.
+    fn push_ones(&mut self, mut n: usize) {
+        while n > 0 && !self.len.is_multiple_of(8) {
+            self.push(true);
+            n -= 1;
+        }
+        self.bytes.resize(self.bytes.len() + n / 8, 0xFF);
+        self.len += n / 8 * 8;
+        for _ in 0..n % 8 {
+            self.push(true);
+        }
+    }
+
     /// `n` zero bits.
     fn push_zeros(&mut self, n: usize) {
         self.len += n;
@@ -130,6 +143,7 @@ enum Data {
 /// One Arrow array under construction.
 pub(crate) struct Column {
     pub(crate) ty: Type,
+    /// the validity bitmap, kept only once a null is pushed (Arrow needs none without nulls)
     valid: Bits,
     /// values pushed (null or not)
     len: usize,
@@ -196,6 +210,9 @@ impl Column {
     }
 
     pub(crate) fn push_null(&mut self) {
+        if self.nulls == 0 {
+            self.valid.push_ones(self.len); // the bitmap, kept from the first null on
+        }
         self.valid.push(false);
         self.len += 1;
         self.nulls += 1;
@@ -237,7 +254,9 @@ impl Column {
 
     #[inline]
     fn mark_valid(&mut self) {
-        self.valid.push(true);
+        if self.nulls > 0 {
+            self.valid.push(true);
+        }
         self.len += 1;
     }
 
@@ -924,6 +943,27 @@ mod tests {
             .chunks(8)
             .map(|c| i64::from_ne_bytes(c.try_into().unwrap()))
             .collect()
+    }
+
+    #[test]
+    fn the_validity_bitmap_begins_at_the_first_null() {
+        for valid_first in [0, 1, 7, 8, 9, 17] {
+            let specs = [ColumnSpec::new("x", Type::Int, 0)];
+            let mut col = Column::build(&specs, &mut 0).unwrap();
+            for i in 0..valid_first {
+                col.push_int(i as i64);
+            }
+            col.push_null();
+            col.push_int(1);
+            let want: Vec<bool> = (0..valid_first)
+                .map(|_| true)
+                .chain([false, true])
+                .collect();
+            let got: Vec<bool> = (0..want.len())
+                .map(|i| col.valid.bytes[i / 8] >> (i % 8) & 1 == 1)
+                .collect();
+            assert_eq!((got, col.valid.len, col.nulls), (want, valid_first + 2, 1));
+        }
     }
 
     #[test]
