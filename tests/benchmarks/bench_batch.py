@@ -18,7 +18,10 @@ and raw Modbus dumps in turn) in one folder:
   with the settings of the cluster ``batch`` starts (``analyzer.fleet.runner.WORKER_CONFIG``);
 - ``dask-2``: ``batch DIR --workers 2`` (the CLI's own two-worker LocalCluster, its start
   included).
-Targets: two workers at least 1.7 times one; Dask at most 10% slower than the loop.
+Targets: two workers at least 1.7 times one; Dask at most 10% slower than the loop. (Set when
+a worker's decoding was Python on one core. On the native core one capture keeps more than a
+core busy: on a 2-core machine a second worker cannot give 1.7 times; the figure is for
+machines with cores to spare.)
 
 The machine is shared: the figures are medians of rounds whose commands run side by side.
 """

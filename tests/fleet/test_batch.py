@@ -3,6 +3,7 @@ checked against what ``decode --format parquet`` and ``stats`` give for each fil
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import shutil
 from collections import Counter
@@ -141,6 +142,16 @@ def test_partitions_are_day_and_bus(fleet: dict[str, Path], dataset: Path) -> No
     assert ("2025-11-24", "can1") in days  # the MCAP recording's bus
     for path in (dataset / layout.RECORDS).rglob("*.parquet"):
         assert "bus" not in pq.read_schema(path).names  # the partition key is the folder
+    # the UTC day of each record's time (the demo's and python-can's have fractions of a
+    # microsecond), in records/ and states/
+    for name in (layout.RECORDS, layout.STATES):
+        whole = table(dataset, name)
+        timed = whole.filter(pa.compute.is_valid(whole["t"]))
+        assert timed.num_rows > 1000
+        for t, day in zip(timed["t"].to_pylist(), timed["day"].to_pylist(), strict=True):
+            assert str(day) == dt.datetime.fromtimestamp(t, dt.UTC).strftime("%Y-%m-%d")
+    demo = rows_of(dataset, layout.RECORDS, fleet["demo"])
+    assert set(demo["t"].to_pylist()) != {round(t, 6) for t in demo["t"].to_pylist()}
     # raw dumps have no clock: the day their file was written
     serial_day = rows_of(dataset, layout.RECORDS, fleet["serial"])
     assert serial_day.num_rows and serial_day["t"].null_count == serial_day.num_rows
