@@ -10,14 +10,12 @@ the Python path for each record, ``other_fields`` included. Batches are Parquet 
 
 from __future__ import annotations
 
-import signal
-import threading
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import IO, Any, Final
 
 import pyarrow as pa
 
+from .interrupts import noted_interrupts
 from .parquet_schema import FAMILY, OTHER_FIELDS, PARSE_SCHEMA, VALUES_KEY, parse_key
 from .sinks.parquet import ROW_GROUP_ROWS, ParquetRecordWriter
 
@@ -43,10 +41,11 @@ def _describe(name: str, type_: pa.DataType, out: list[tuple[str, str, int]]) ->
         out.append((name, _TYPES[type_], 0))
 
 
-def columns() -> list[tuple[str, str, int]]:
-    """``PARSE_SCHEMA`` described for the core."""
+def columns(schema: pa.Schema = PARSE_SCHEMA) -> list[tuple[str, str, int]]:
+    """A schema described for the core (``PARSE_SCHEMA``'s records by default; the fleet's
+    state columns, analyzer/fleet/tables.py)."""
     out: list[tuple[str, str, int]] = []
-    for f in PARSE_SCHEMA:
+    for f in schema:
         _describe(f.name, f.type, out)
     return out
 
@@ -56,14 +55,16 @@ def families() -> list[tuple[str, str]]:
     return [(protocol, parse_key(family)) for protocol, family in FAMILY.items()]
 
 
-def open_run(native: Any, path: str, **options: Any) -> Any:
-    """The core's ``ArrowRun`` over a capture (the options of ``DecodeRun`` that apply)."""
+def open_run(native: Any, path: str, states: pa.Schema | None = None, **options: Any) -> Any:
+    """The core's ``ArrowRun`` over a capture (the options of ``DecodeRun`` that apply);
+    ``states``: also the state samples of its records, in these columns (the fleet dataset)."""
     return native.ArrowRun(
         path,
         columns(),
         families(),
         OTHER_FIELDS,
         VALUES_KEY,
+        states=None if states is None else columns(states),
         **options,
     )
 
@@ -111,32 +112,11 @@ def _array(type_: pa.DataType, parts: Iterator[Any]) -> pa.Array:
     return pa.Array.from_buffers(type_, length, buffers, nulls, 0, children)
 
 
-def batch_table(parts: list[Any]) -> pa.Table:
-    """One batch of the core as a table in ``PARSE_SCHEMA``'s layout."""
+def batch_table(parts: list[Any], schema: pa.Schema = PARSE_SCHEMA) -> pa.Table:
+    """One batch of the core's columns as a table of ``schema`` (the one they were described
+    from: ``PARSE_SCHEMA``'s records by default)."""
     it = iter(parts)
-    return pa.Table.from_arrays([_array(f.type, it) for f in PARSE_SCHEMA], schema=PARSE_SCHEMA)
-
-
-@contextmanager
-def _interrupts_between_batches() -> Iterator[list[int]]:
-    """Ctrl-C, SIGTERM and SIGHUP noted (the list gets the signal) rather than raised: most of
-    the time goes to Arrow writing a batch, and a write broken off leaves a file no reader
-    opens. Only the main thread can handle signals: elsewhere nothing is noted."""
-    noted: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
-        yield noted
-        return
-
-    def note(signum: int, frame: Any) -> None:
-        noted.append(signum)
-
-    wanted = [signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)]
-    previous = {sig: signal.signal(sig, note) for sig in wanted if sig is not None}
-    try:
-        yield noted
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
+    return pa.Table.from_arrays([_array(f.type, it) for f in schema], schema=schema)
 
 
 def write(run: Any, out: str | IO[bytes], tick: Callable[[], None] | None = None) -> int:
@@ -146,8 +126,10 @@ def write(run: Any, out: str | IO[bytes], tick: Callable[[], None] | None = None
     is raised, as with the Python engine; on any other failure nothing more is written."""
     writer = ParquetRecordWriter(out)
     try:
-        with _interrupts_between_batches() as interrupted:
-            for _rows, parts in run:
+        # noted, acted on between batches: most of the time goes to Arrow writing a batch, and
+        # a write broken off leaves a file no reader opens
+        with noted_interrupts() as interrupted:
+            for _rows, parts, _states in run:
                 writer.write_parsed(batch_table(parts))
                 if tick is not None:
                     tick()

@@ -170,11 +170,16 @@ def mm_table() -> pa.Array:
     return pa.array([opening_mm(v) for v in range(1 << 16)], FLOAT)
 
 
+# typed once: pyarrow infers a Python value's type at every call (and tries to import dateutil)
+_LOWEST: Final = pa.scalar(0, INT)
+_BEYOND: Final = pa.scalar(1 << 16, INT)
+_NO_OPENING: Final = pa.scalar(None, INT)
+
+
 def millimetres(opening: pa.Array | pa.ChunkedArray) -> pa.Array | pa.ChunkedArray:
     """Opening values in millimetres, as ``opening_mm`` gives them (null outside 0-65535)."""
-    table = mm_table()
-    inside = pc.and_(pc.greater_equal(opening, 0), pc.less(opening, len(table)))
-    return pc.take(table, pc.if_else(inside, opening, None))
+    inside = pc.and_(pc.greater_equal(opening, _LOWEST), pc.less(opening, _BEYOND))
+    return pc.take(mm_table(), pc.if_else(inside, opening, _NO_OPENING))
 
 
 def described_field(

@@ -35,6 +35,7 @@ from typing import Any
 
 from decoders.model import Record
 
+from . import interrupts
 from .batches import error_count, session_engine
 from .listener import Listener
 from .model import ERROR, SourceEvent
@@ -329,6 +330,8 @@ def _handled_by(handler: Callable[[int, Any], None]) -> Iterator[None]:
         for sig in wanted
         if sig is not None
         and (sig == signal.SIGTERM or signal.getsignal(sig) is not signal.SIG_IGN)
+        # a caller that notes them itself (eg2scope batch) stops the session at its own steps
+        and not interrupts.notes(sig)
     }
     try:
         yield

@@ -25,10 +25,10 @@ class LatencyHistogram:
         self.count = 0
         self.max = 0.0
 
-    def add(self, ms: float) -> None:
-        self.count += 1
+    def add(self, ms: float, times: int = 1) -> None:
+        self.count += times
         self.max = max(self.max, ms)
-        self.buckets[int(math.log(max(ms, 1e-6)) / _LOG_STEP)] += 1
+        self.buckets[int(math.log(max(ms, 1e-6)) / _LOG_STEP)] += times
 
     def percentile(self, p: float) -> float | None:
         if not self.count:

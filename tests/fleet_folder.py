@@ -3,7 +3,10 @@ benchmark decode.
 
 ``make_fleet(root, frames)`` writes, under ``root``:
 - ``site-a/cell1/``: a candump -L log and a gzipped one (moving grippers, values that vary);
-- ``site-a/cell2/``: an ASC log written by python-can, and an eg2scope MCAP recording;
+- ``site-a/cell2/``: an ASC and a BLF log written by python-can, and an eg2scope MCAP
+  recording;
+- with ``demo``: ``site-c/demo.mcap``, what ``eg2scope record --demo`` records (three buses,
+  the wall clock's times);
 - ``site-b/``: a raw serial dump (regular protocol) and a raw Modbus RTU dump;
 - ``broken/``: a gzipped log cut off mid-stream (damaged) and an .mcap that is not MCAP
   (unreadable);
@@ -13,7 +16,9 @@ benchmark decode.
 from __future__ import annotations
 
 import gzip
+import os
 import random
+import subprocess
 import sys
 from pathlib import Path
 
@@ -31,6 +36,7 @@ import traffic
 sys.path.pop(0)
 
 DAY = 86_400.0
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _candump(path: Path, frames: int, seed: int, t0: float, channel: str = "can0") -> None:
@@ -42,8 +48,10 @@ def _candump(path: Path, frames: int, seed: int, t0: float, channel: str = "can0
         path.write_bytes(text)
 
 
-def _asc(path: Path, frames: int, seed: int, t0: float) -> None:
-    with can.ASCWriter(str(path)) as writer:
+def _python_can(path: Path, frames: int, seed: int, t0: float) -> None:
+    """An .asc or .blf log, as python-can writes them."""
+    writer_class = can.ASCWriter if path.suffix == ".asc" else can.BLFWriter
+    with writer_class(str(path)) as writer:
         for f in traffic.can_frames(frames, seed=seed, t0=t0):
             writer.on_message_received(
                 can.Message(
@@ -63,13 +71,28 @@ def _mcap(path: Path, source: Path) -> None:
         Session(CaptureSource(reader, None), [recorder]).run()
 
 
-def make_fleet(root: Path, frames: int = 2000, broken: bool = True) -> dict[str, Path]:
+def _demo(path: Path) -> None:
+    """``eg2scope record --demo``: the simulated grippers on all three buses."""
+    subprocess.run(
+        [sys.executable, "-m", "analyzer", "record", "--demo", "-o", str(path), "--duration", "5"],
+        check=True,
+        capture_output=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        timeout=120,
+    )
+
+
+def make_fleet(
+    root: Path, frames: int = 2000, broken: bool = True, demo: bool = False
+) -> dict[str, Path]:
     """The folder; name -> path of each capture."""
     t0 = 1_763_700_000.0  # 2025-11-21 UTC
     paths = {
         "candump": root / "site-a/cell1/can_day1.log",
         "candump_gz": root / "site-a/cell1/can_day2.log.gz",
         "asc": root / "site-a/cell2/trace.asc",
+        "blf": root / "site-a/cell2/trace.blf",
         "mcap": root / "site-a/cell2/run.mcap",
         "serial": root / "site-b/serial.bin",
         "modbus": root / "site-b/modbus.bin",
@@ -78,7 +101,8 @@ def make_fleet(root: Path, frames: int = 2000, broken: bool = True) -> dict[str,
         path.parent.mkdir(parents=True, exist_ok=True)
     _candump(paths["candump"], frames, 1, t0)
     _candump(paths["candump_gz"], frames, 2, t0 + DAY)
-    _asc(paths["asc"], frames, 3, t0 + 2 * DAY)
+    _python_can(paths["asc"], frames, 3, t0 + 2 * DAY)
+    _python_can(paths["blf"], frames, 7, t0 + 2.5 * DAY)
     staging = root / "mcap-source.log"
     _candump(staging, frames, 4, t0 + 3 * DAY, channel="can1")
     _mcap(paths["mcap"], staging)
@@ -86,6 +110,10 @@ def make_fleet(root: Path, frames: int = 2000, broken: bool = True) -> dict[str,
     paths["serial"].write_bytes(b"".join(traffic.serial_frames(frames, seed=5)))
     paths["modbus"].write_bytes(b"".join(traffic.modbus_frames(frames, seed=6)))
     (root / "site-a/README.txt").write_text("cell 1: gripper on can0, 1 Mbit/s\n")
+    if demo:
+        paths["demo"] = root / "site-c/demo.mcap"
+        paths["demo"].parent.mkdir(exist_ok=True)
+        _demo(paths["demo"])
     if broken:
         (root / "broken").mkdir(exist_ok=True)
         paths["damaged"] = root / "broken/cut.log.gz"

@@ -4,12 +4,13 @@ this machine's cores or a Dask cluster (analyzer/fleet)."""
 from __future__ import annotations
 
 import argparse
-import signal
 import textwrap
 from pathlib import Path
 from typing import Any
 
+from .. import native
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
+from ..interrupts import noted_interrupts
 from .common import add_protocol_argument, positive_int
 
 INSTALL_HINT = "pip install 'eg2scope[fleet]'"
@@ -42,7 +43,7 @@ def add_subparser(sub: Any) -> None:
                 "exit status: 0 every capture decoded; 1 a capture could not be read or "
                 "written (the others are in the dataset); 2 usage error; 3 some capture is "
                 "damaged (decoded as far as possible, marked in captures/); 130 interrupted "
-                "(run again to finish)",
+                "by Ctrl-C, SIGTERM or SIGHUP (run again to finish)",
                 width=88,
             )
         ),
@@ -74,6 +75,15 @@ def add_subparser(sub: Any) -> None:
         "--force", action="store_true", help="decode every capture again, even those in the dataset"
     )
     add_protocol_argument(parser)
+    parser.add_argument(
+        "--engine",
+        choices=native.ENGINES,
+        default="auto",
+        help="auto: the native core wherever 'decode' uses it (candump logs and raw dumps, "
+        "their state samples too; CAN sessions), else Python (default); python: the Python "
+        "decoders only; native: as auto, but a usage error when the native core is not built. "
+        "The dataset is the same either way",
+    )
     parser.add_argument(
         "--host",
         default="127.0.0.1",
@@ -108,6 +118,10 @@ def _check(args: argparse.Namespace) -> None:
             f"batch on several workers needs Dask, which is not installed: {INSTALL_HINT}, "
             "or run it in one process with --workers 1"
         )
+    if args.engine == "native" and not native.available():
+        raise UsageError(
+            f"--engine native: the native core is {native.WHY_NOT}; use --engine auto or python"
+        )
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise UsageError(f"the output {args.output} is a file; batch writes a dataset folder")
@@ -130,27 +144,44 @@ def run(args: argparse.Namespace) -> int:
     dashboard = None if args.dashboard_address.lower() == "none" else args.dashboard_address
     options = DaskOptions(args.workers or default_workers(), args.scheduler, args.host, dashboard)
     show = not args.no_progress and sys.stderr.isatty()
-    try:
-        with layout.run_lock(root):
-            jobs, skipped = plan(paths, root, args.protocol, args.force)
-            with BatchProgress(len(paths), tally, show) as progress:
-                for result in skipped:
-                    progress.report(result)
-                if options.scheduler is None and options.workers == 1:
-                    run_in_loop(jobs, progress.report)
-                elif jobs:
-                    run_on_dask(jobs, options, progress.report, progress.cluster_started)
-    except layout.DatasetLocked as exc:
-        raise UsageError(str(exc)) from None
-    except KeyboardInterrupt:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # one Ctrl-C is enough: finish saying so
-        held = len(layout.done_hashes(root))  # the last results may not have been reported
-        print(
-            f"eg2scope: interrupted: {root} holds {held} complete captures; run the same "
-            "command again to finish the rest",
-            file=sys.stderr,
-        )
-        return EXIT_INTERRUPTED
+    # Ctrl-C, SIGTERM and SIGHUP are noted and acted on between batches and captures: raised
+    # where they land, library code could lose them (analyzer/interrupts.py)
+    with noted_interrupts() as noted:
+
+        def interrupted() -> bool:
+            return bool(noted)
+
+        try:
+            with layout.run_lock(root):
+                jobs, skipped = plan(paths, root, args.protocol, args.force, args.engine)
+                sizes = {str(p): p.stat().st_size for p in paths}
+                with BatchProgress(sizes, tally, show) as progress:
+                    for result in skipped:
+                        progress.report(result)
+                    told = progress.capture_progress
+                    if options.scheduler is None and options.workers == 1:
+                        run_in_loop(jobs, progress.report, told, interrupted)
+                    elif jobs:
+                        run_on_dask(
+                            jobs,
+                            options,
+                            progress.report,
+                            progress.cluster_started,
+                            told,
+                            interrupted,
+                        )
+                    if interrupted():  # after the last capture: the run was cut short all the same
+                        raise KeyboardInterrupt
+        except layout.DatasetLocked as exc:
+            raise UsageError(str(exc)) from None
+        except KeyboardInterrupt:
+            held = len(layout.done_hashes(root))  # the last results may not have been reported
+            print(
+                f"eg2scope: interrupted: {root} holds {held} complete captures; run the same "
+                "command again to finish the rest",
+                file=sys.stderr,
+            )
+            return EXIT_INTERRUPTED
     print_summary(tally, str(root))
     if tally.count("unreadable", "failed"):
         return EXIT_ERROR

@@ -12,18 +12,22 @@ from __future__ import annotations
 import datetime as dt
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-from .. import __version__
-from ..commands.common import CaptureOptions, open_reader, run_capture
-from ..sinks.stats import StatsListener
+import pyarrow as pa
+
+from .. import __version__, native, native_parquet
+from ..commands.common import CaptureOptions, byte_protocol, open_reader, run_capture
+from ..sources.capture import CaptureReader
+from ..stats import CaptureStats
 from . import layout
 from .inputs import capture_suffix, content_hash
-from .listeners import RecordPartitions, StatePartitions
+from .listeners import CaptureTables, Checkpoint, Progress, SessionTables, Throttled
 from .partitions import PartitionFiles
-from .tables import COUNTS, LATENCY, captures_table, utc_day
+from .tables import COUNTS, LATENCY, STATE_COLUMNS, captures_table, utc_day
 
 # outcomes
 DONE: Final = "done"
@@ -39,6 +43,9 @@ class CaptureJob:
     root: str
     protocol: str | None = None  # None: detected, as decode does
     force: bool = False  # decode it again even if the dataset holds it
+    engine: str = (
+        "auto"  # "python": the Python decoders only; else the native core where it applies
+    )
 
 
 @dataclass
@@ -53,15 +60,31 @@ class CaptureResult:
     seconds: float = 0.0
 
 
-def decode_capture(job: CaptureJob) -> CaptureResult:
-    """Decode one capture into the dataset under ``job.root``."""
+class _WriteFailed(Exception):
+    """The capture's tables could not be written (the message says why)."""
+
+
+def _never() -> bool:
+    return False
+
+
+def decode_capture(
+    job: CaptureJob,
+    progress: Progress | None = None,
+    interrupted: Callable[[], bool] = _never,
+) -> CaptureResult:
+    """Decode one capture into the dataset under ``job.root``. ``progress`` is told how far it
+    has got now and then (bytes of the file read, records); ``interrupted`` is asked between
+    batches, and True stops it with KeyboardInterrupt, nothing of it written."""
     started = time.perf_counter()
-    result = _decode(job)
+    result = _decode(job, progress, interrupted)
     result.seconds = time.perf_counter() - started
     return result
 
 
-def _decode(job: CaptureJob) -> CaptureResult:
+def _decode(
+    job: CaptureJob, progress: Progress | None, interrupted: Callable[[], bool]
+) -> CaptureResult:
     root, path = Path(job.root), Path(job.path)
     try:
         digest = content_hash(path)
@@ -76,23 +99,21 @@ def _decode(job: CaptureJob) -> CaptureResult:
     except (OSError, ValueError) as exc:
         return CaptureResult(job.path, UNREADABLE, digest, message=_reason(exc))
     files = PartitionFiles(root, digest, utc_day(stat.st_mtime))
-    stats = StatsListener()
-    listeners = [RecordPartitions(files, job.path), StatePartitions(files, job.path), stats]
+    tables = CaptureTables(files, job.path)
     try:
-        session, reader = run_capture(_options(job), listeners, reader)
-        damage = list(reader.errors)
-        if session.counts.interrupted:
+        damage = _fill(job, reader, tables, progress, interrupted)
+        if interrupted():
             raise KeyboardInterrupt
-        if session.detached:
-            files.discard()
-            message = f"cannot write: {session.detached[0][1]}"
-            return CaptureResult(job.path, FAILED, digest, message=message)
-        if damage and not stats.stats.records:  # nothing of it could be read
+        stats = tables.summary.stats
+        if damage and not stats.records:  # nothing of it could be read
             files.discard()
             return CaptureResult(job.path, UNREADABLE, digest, message="; ".join(damage))
         files.commit()
         row = _captures_row(job.path, digest, stat, damage, stats, files)
         _write_row(root, files.first_day or files.fallback_day, digest, row)
+    except _WriteFailed as exc:
+        files.discard()
+        return CaptureResult(job.path, FAILED, digest, message=f"cannot write: {exc}")
     except BaseException:
         files.discard()
         raise
@@ -107,8 +128,87 @@ def _decode(job: CaptureJob) -> CaptureResult:
     )
 
 
+def _fill(
+    job: CaptureJob,
+    reader: CaptureReader,
+    tables: CaptureTables,
+    progress: Progress | None,
+    interrupted: Callable[[], bool],
+) -> list[str]:
+    """Decode the capture into ``tables``: on the native core where ``decode`` uses it (the
+    Python ``reader``, opened for the same checks and messages, is then closed), else in a
+    session. The damage found in the input."""
+    run = _native_run(job, reader)
+    if run is None:
+        return _in_session(job, reader, tables, progress, interrupted)
+    reader.close()
+    return _natively(run, tables, progress, interrupted)
+
+
+def _native_run(job: CaptureJob, reader: CaptureReader) -> Any:
+    """The native core's run of a capture, records and state samples as columns, or None:
+    the Python engine was asked for, or the core does not read this capture (as ``decode``
+    decides, analyzer/native.py)."""
+    if job.engine == "python" or native.ineligible(reader, "parquet", None, None):
+        return None
+    opts = _options(job)
+    try:
+        return native_parquet.open_run(
+            native._native, opts.path, states=STATE_COLUMNS, protocol=byte_protocol(opts)
+        )
+    except (native._native.Unsupported, OSError):  # type: ignore[union-attr]
+        return None  # the core's word: the session decodes it, or says why it cannot
+
+
+def _natively(
+    run: Any, tables: CaptureTables, progress: Progress | None, interrupted: Callable[[], bool]
+) -> list[str]:
+    """A native run's batches into the tables (records and samples: no object per row)."""
+    report = None if progress is None else Throttled(progress)
+    try:
+        for _rows, parts, states in run:
+            tables.write_parsed(native_parquet.batch_table(parts))
+            if states is not None:
+                tables.add_states(native_parquet.batch_table(states[1], STATE_COLUMNS))
+            if interrupted():
+                raise KeyboardInterrupt
+            if report is not None:
+                report(run.position, run.records_written)
+        tables.close()
+    except (OSError, ValueError, pa.ArrowException) as exc:  # an output, or a sample
+        raise _WriteFailed(str(exc)) from None
+    finally:
+        run.close()
+    return list(run.errors)
+
+
+def _in_session(
+    job: CaptureJob,
+    reader: CaptureReader,
+    tables: CaptureTables,
+    progress: Progress | None,
+    interrupted: Callable[[], bool],
+) -> list[str]:
+    """The capture through a session (the Python decoders, or the native core's CAN decoding
+    and Tracker, as any session on CAN input), its listeners filling the tables."""
+    output = SessionTables(tables)
+    checkpoint = Checkpoint(lambda: reader.position, progress or _ignore, interrupted)
+    session, reader = run_capture(_options(job), [output, checkpoint], reader)
+    if session.counts.interrupted:
+        raise KeyboardInterrupt
+    failed = [exc for listener, exc in session.detached if listener is output]
+    if failed:
+        raise _WriteFailed(str(failed[0]))
+    return list(reader.errors)
+
+
+def _ignore(position: int, records: int) -> None:
+    pass
+
+
 def _options(job: CaptureJob) -> CaptureOptions:
-    return CaptureOptions(path=job.path, protocol=job.protocol, progress=False)
+    engine = "python" if job.engine == "python" else "auto"
+    return CaptureOptions(path=job.path, protocol=job.protocol, progress=False, engine=engine)
 
 
 def _reason(exc: BaseException) -> str:
@@ -120,10 +220,9 @@ def _captures_row(
     digest: str,
     stat: os.stat_result,
     damage: list[str],
-    listener: StatsListener,
+    stats: CaptureStats,
     files: PartitionFiles,
 ) -> dict[str, Any]:
-    stats = listener.stats
     data = stats.as_dict()
     totals = stats.totals()
     latency = totals.latency.summary()

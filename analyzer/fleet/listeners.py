@@ -1,9 +1,12 @@
-"""The session listeners that fill one capture's partitions: its records (the same columns as
-``decode --format parquet``, by the same JSONL-to-Arrow path) and its state samples."""
+"""What fills one capture's partitions: its records (the same columns as ``decode --format
+parquet``), its state samples, the counts of its ``captures/`` row; as tables (the native
+core's columns) or as a session's listeners (records as JSONL, by the path ``decode --format
+parquet`` takes, samples as objects or a native ``SampleBatch``)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 
 import pyarrow as pa
 
@@ -12,57 +15,99 @@ from decoders.model import Record
 from ..batches import records_jsonl
 from ..listener import Listener
 from ..model import StateSample
-from ..sinks.parquet import ROW_GROUP_ROWS, JsonlTables
+from ..sinks.parquet import JsonlTables
 from . import layout
 from .partitions import PartitionFiles
-from .tables import RECORDS_SCHEMA, STATES_SCHEMA, states_table, with_source
+from .summary import RecordSummary
+from .tables import RECORDS_SCHEMA, STATES_SCHEMA, state_rows, states_table, with_source
+
+#: how far a capture has got: (bytes of the file read, records decoded)
+Progress = Callable[[int, int], None]
 
 
-class RecordPartitions(JsonlTables, Listener):
-    """Records -> JSONL -> the Parquet columns (as ``decode --format parquet`` makes them) ->
-    the capture's ``records/`` partitions."""
+class CaptureTables(JsonlTables):
+    """One capture's tables into its partitions: record tables (as ``decode --format parquet``
+    makes them: ``write_jsonl`` or ``write_parsed``) and state samples (``add_states``), and
+    the counts of its records (``summary``)."""
 
     def __init__(self, files: PartitionFiles, path: str) -> None:
         JsonlTables.__init__(self)
         self.files = files
         self.path = path
-        self.label = "fleet records"
-
-    def on_records(self, records: Sequence[Record]) -> None:
-        self.write_jsonl(records_jsonl(records))
+        self.summary = RecordSummary()
 
     def add(self, table: pa.Table, final: bool = False) -> None:
-        table = with_source(table, self.path, self.files.hash)
-        self.files.add(layout.RECORDS, RECORDS_SCHEMA, table)
+        self.summary.add(table)
+        self.files.add(layout.RECORDS, RECORDS_SCHEMA, self._sourced(table))
+
+    def add_states(self, samples: Sequence[StateSample] | pa.Table) -> None:
+        """State samples: objects, a native ``SampleBatch``, or a table of ``STATE_COLUMNS``."""
+        rows = state_rows(samples) if isinstance(samples, pa.Table) else states_table(samples)
+        self.files.add(layout.STATES, STATES_SCHEMA, self._sourced(rows))
+
+    def _sourced(self, table: pa.Table) -> pa.Table:
+        return with_source(table, self.path, self.files.hash)
 
     def close(self) -> None:
         self.flush_text(final=True)
 
 
-class StatePartitions(Listener):
-    """State samples -> the capture's ``states/`` partitions, a row group's worth at a time."""
+class SessionTables(Listener):
+    """A session's records and samples into ``CaptureTables``."""
 
     wants_states = True
 
-    def __init__(self, files: PartitionFiles, path: str) -> None:
-        self.files = files
-        self.path = path
-        self.held: list[StateSample] = []
-        self.label = "fleet states"
+    def __init__(self, tables: CaptureTables) -> None:
+        self.tables = tables
+        self.label = "fleet dataset"
 
     def on_records(self, records: Sequence[Record]) -> None:
-        pass  # the samples are what this one keeps
+        self.tables.write_jsonl(records_jsonl(records))
 
     def on_states(self, samples: Sequence[StateSample]) -> None:
-        self.held += samples
-        if len(self.held) >= ROW_GROUP_ROWS:
-            self._flush()
-
-    def _flush(self) -> None:
-        if self.held:
-            table = with_source(states_table(self.held), self.path, self.files.hash)
-            self.files.add(layout.STATES, STATES_SCHEMA, table)
-            self.held = []
+        self.tables.add_states(samples)
 
     def close(self) -> None:
-        self._flush()
+        self.tables.close()
+
+
+class Checkpoint(Listener):
+    """After every batch of a session: report how far the capture has got (``progress``, at
+    most every ``PROGRESS_S``), and stop at an interrupt that was noted (``interrupted``):
+    KeyboardInterrupt raised here, between batches, ends the session as Ctrl-C does."""
+
+    def __init__(
+        self, position: Callable[[], int], progress: Progress, interrupted: Callable[[], bool]
+    ) -> None:
+        self.position = position
+        self.progress = Throttled(progress)
+        self.interrupted = interrupted
+        self.records = 0
+        self.label = "fleet progress"
+
+    def on_records(self, records: Sequence[Record]) -> None:
+        self.records += len(records)
+
+    def tick(self, now: float) -> None:
+        if self.interrupted():
+            raise KeyboardInterrupt
+        self.progress(self.position(), self.records)
+
+
+#: seconds between two reports of one capture's progress (a bar redraws ten times a second)
+PROGRESS_S = 0.1
+
+
+class Throttled:
+    """``progress`` called at most every ``seconds``."""
+
+    def __init__(self, progress: Progress, seconds: float = PROGRESS_S) -> None:
+        self.progress = progress
+        self.seconds = seconds
+        self.due = 0.0
+
+    def __call__(self, position: int, records: int) -> None:
+        now = time.monotonic()
+        if now >= self.due:
+            self.due = now + self.seconds
+            self.progress(position, records)

@@ -10,9 +10,11 @@ import pyarrow.compute as pc
 
 from ..sinks.parquet import RowGroupWriter
 from . import layout
-from .tables import BUS, HASH, PATH, days
+from .tables import BUS, HASH, PATH, STATE_DICTIONARY, days
 
-_KEY_SEPARATOR = "\x00"  # between day and bus in a row's partition key (in neither)
+# between day and bus in a row's partition key (in neither); scalars typed, as pyarrow would
+# infer a Python value's type at every call
+_KEY_SEPARATOR = pa.scalar("\x00", pa.string())
 
 
 class PartitionFiles:
@@ -35,15 +37,20 @@ class PartitionFiles:
             return
         day = days(table.column("t"), self.fallback_day)
         if self.first_day is None and table_name == layout.RECORDS:
-            self.first_day = day[0].as_py()
+            self.first_day = day if isinstance(day, str) else day[0].as_py()
         bus = table.column(BUS)
+        rest = table.drop_columns([BUS]).select(schema.names)
+        first, last = (v.as_py() for v in pc.min_max(bus).values())
+        if isinstance(day, str) and first == last:  # the usual table: one partition
+            self._writer(table_name, schema, day, first).add(rest)
+            return
+        if isinstance(day, str):
+            day = pa.repeat(pa.scalar(day, pa.string()), table.num_rows)
         key = pc.binary_join_element_wise(day, bus, _KEY_SEPARATOR)
-        rest = table.drop_columns([BUS])
-        values = pc.unique(key).to_pylist()
-        for value in values:
-            part = rest if len(values) == 1 else rest.filter(pc.equal(key, value))
-            day_of, bus_of = value.split(_KEY_SEPARATOR)
-            self._writer(table_name, schema, day_of, bus_of).add(part.select(schema.names))
+        for value in pc.unique(key).to_pylist():
+            part = rest.filter(pc.equal(key, pa.scalar(value, pa.string())))
+            day_of, bus_of = value.split(_KEY_SEPARATOR.as_py())
+            self._writer(table_name, schema, day_of, bus_of).add(part)
 
     def _writer(self, table_name: str, schema: pa.Schema, day: str, bus: str) -> RowGroupWriter:
         key = (table_name, day, bus)
@@ -52,7 +59,8 @@ class PartitionFiles:
             folder = layout.partition_dir(self.root, table_name, day, bus)
             folder.mkdir(parents=True, exist_ok=True)
             final = layout.data_file(folder, self.hash)
-            writer = RowGroupWriter(str(layout.temp_name(final)), schema, (PATH, HASH))
+            encoded = (PATH, HASH, *(STATE_DICTIONARY if table_name == layout.STATES else ()))
+            writer = RowGroupWriter(str(layout.temp_name(final)), schema, encoded)
             held = self.writers[key] = (writer, final)
         return held[0]
 

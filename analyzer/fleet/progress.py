@@ -1,13 +1,20 @@
-"""What a batch run shows: a progress bar on stderr (captures done, records, rate, errors) while it
-runs, one line per capture that went wrong, and a summary table at the end."""
+"""What a batch run shows: a progress bar on stderr (captures done, bytes read, records, rate,
+errors) while it runs, one line per capture that went wrong, and a summary table at the end."""
 
 from __future__ import annotations
 
 import sys
+import threading
 from typing import Any
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    DownloadColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+)
 from rich.table import Table
 
 from ..lifecycle import Running
@@ -18,23 +25,32 @@ _STYLE = {DAMAGED: "yellow", UNREADABLE: "red", FAILED: "red"}
 
 
 class BatchProgress(Running):
-    """The run's progress bar; ``report`` is given each capture's result as it completes."""
+    """The run's progress bar, over the bytes of every capture: ``capture_progress`` is told
+    how far a capture being decoded has got (from this process or a Dask worker's events), so
+    the bar moves within a capture; ``report`` is given each capture's result as it completes."""
 
-    def __init__(self, total: int, tally: Tally, show: bool) -> None:
+    def __init__(self, sizes: dict[str, int], tally: Tally, show: bool) -> None:
         self.tally = tally
+        self.sizes = sizes
+        self.done_bytes = 0
+        self.running: dict[str, tuple[int, int]] = {}  # path -> (bytes read, records)
+        self.finished: set[str] = set()
+        self.lock = threading.Lock()  # Dask's events come on its client's thread
         self.console = Console(stderr=True, highlight=False)
         self.progress = Progress(
-            TextColumn("[bold]captures"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[records]:>12,} records  {task.fields[rate]:>9,.0f}/s"),
+            TextColumn("[bold]captures {task.fields[captures]}"),
+            BarColumn(bar_width=20),  # the whole line fits 80 columns
+            DownloadColumn(),
+            TextColumn("{task.fields[records]:,} records {task.fields[rate]:,.0f}/s"),
             TextColumn("{task.fields[errors]:,} errors"),
             TimeElapsedColumn(),
             console=self.console,
             transient=True,
             disable=not show,
         )
-        self.task = self.progress.add_task("", total=total, records=0, rate=0.0, errors=0)
+        self.task = self.progress.add_task(
+            "", total=sum(sizes.values()), captures=f"0/{len(sizes)}", records=0, rate=0.0, errors=0
+        )
 
     def start(self) -> None:
         self.progress.start()
@@ -50,18 +66,38 @@ class BatchProgress(Running):
         noun = "worker" if workers == 1 else "workers"
         self.console.print(f"eg2scope: Dask: {workers} {noun}{where}", highlight=False)
 
+    def capture_progress(self, path: str, position: int, records: int) -> None:
+        """A capture being decoded has read ``position`` bytes of its file into ``records``."""
+        with self.lock:
+            if path in self.sizes and path not in self.finished:  # (a worker's late event)
+                self.running[path] = (min(position, self.sizes[path]), records)
+                self._update()
+
     def report(self, result: CaptureResult) -> None:
+        with self.lock:
+            self.tally.add(result)
+            self.finished.add(result.path)
+            self.running.pop(result.path, None)
+            self.done_bytes += self.sizes.get(result.path, 0)
+            if result.status in _STYLE:
+                self.console.print(
+                    f"eg2scope: {result.path}: {result.status}: {result.message}",
+                    style=_STYLE[result.status],
+                    soft_wrap=True,
+                )
+            self._update()
+
+    def _update(self) -> None:
         tally = self.tally
-        tally.add(result)
-        if result.status in _STYLE:
-            self.console.print(
-                f"eg2scope: {result.path}: {result.status}: {result.message}",
-                style=_STYLE[result.status],
-                soft_wrap=True,
-            )
-        rate = tally.records / tally.elapsed if tally.elapsed > 0 else 0.0
+        records = tally.records + sum(r for _, r in self.running.values())
+        elapsed = tally.elapsed
         self.progress.update(
-            self.task, advance=1, records=tally.records, rate=rate, errors=tally.errors
+            self.task,
+            completed=self.done_bytes + sum(p for p, _ in self.running.values()),
+            captures=f"{len(tally.results)}/{len(self.sizes)}",
+            records=records,
+            rate=records / elapsed if elapsed > 0 else 0.0,
+            errors=tally.errors,
         )
 
 

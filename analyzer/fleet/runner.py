@@ -10,7 +10,7 @@ on.
 from __future__ import annotations
 
 import contextlib
-import importlib
+import functools
 import logging
 import os
 import time
@@ -19,9 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-import pyarrow.dataset as ds
-
-from ..sources.capture import CAPTURE_READERS, RAW_BYTES
 from . import layout
 from .capture_task import (
     DAMAGED,
@@ -32,6 +29,7 @@ from .capture_task import (
     CaptureResult,
     decode_capture,
 )
+from .listeners import Throttled
 from .tables import HASH, PATH
 
 Report = Callable[[CaptureResult], None]
@@ -51,7 +49,7 @@ class DaskOptions:
 
 
 def plan(
-    paths: Iterable[Path], root: Path, protocol: str | None, force: bool
+    paths: Iterable[Path], root: Path, protocol: str | None, force: bool, engine: str = "auto"
 ) -> tuple[list[CaptureJob], list[CaptureResult]]:
     """The jobs to run, and the captures skipped without reading them: a path whose size and
     modification time match its row in ``captures/`` has the same content (as make and rsync
@@ -64,7 +62,7 @@ def plan(
         if digest is not None:
             skipped.append(CaptureResult(str(path), SKIPPED, digest, message="unchanged"))
         else:
-            jobs.append(CaptureJob(str(path), str(root), protocol, force))
+            jobs.append(CaptureJob(str(path), str(root), protocol, force, engine))
     return jobs, skipped
 
 
@@ -73,6 +71,8 @@ def _known(root: Path) -> dict[tuple[str, int, int], str]:
     files = sorted((root / layout.CAPTURES).glob("day=*/*.parquet"))
     if not files:
         return {}
+    import pyarrow.dataset as ds  # 0.1 s to import: only for a dataset that holds captures
+
     columns = [PATH, HASH, "size", "mtime"]
     table = ds.dataset([str(f) for f in files], format="parquet").to_table(columns=columns)
     table = table.set_column(3, "mtime", table.column("mtime").cast("int64"))
@@ -83,19 +83,42 @@ def _known(root: Path) -> dict[tuple[str, int, int], str]:
     }
 
 
-def run_in_loop(jobs: list[CaptureJob], report: Report) -> None:
-    """Every capture in this process, one after the other (no Dask needed)."""
-    _import_readers()
+#: how far a capture has got, for the progress bar: (path, bytes of it read, records)
+CaptureProgress = Callable[[str, int, int], None]
+#: the Dask topic the workers tell it on (Worker.log_event, Client.subscribe_topic)
+PROGRESS_TOPIC: Final = "eg2scope-batch-progress"
+#: seconds between two looks at a Ctrl-C while waiting for Dask's results
+POLL_S: Final = 0.05
+#: seconds between two progress events of a Dask worker
+WORKER_PROGRESS_S: Final = 0.5
+
+
+def run_in_loop(
+    jobs: list[CaptureJob],
+    report: Report,
+    progress: CaptureProgress | None = None,
+    interrupted: Callable[[], bool] = lambda: False,
+) -> None:
+    """Every capture in this process, one after the other (no Dask needed); ``interrupted``
+    is asked before each capture and between its batches (KeyboardInterrupt when it says so)."""
     for job in jobs:
-        report(decode_capture(job))
+        if interrupted():
+            raise KeyboardInterrupt
+        told = None if progress is None else functools.partial(progress, job.path)
+        report(decode_capture(job, told, interrupted))
 
 
-def _import_readers() -> None:
-    """Import every capture reader now, not at its format's first file: CPython 3.11 takes a
-    Ctrl-C that lands inside an import's generated code (dataclasses) as unhandled and ends
-    the process by SIGINT at exit, even though the batch handled it and said so."""
-    for target in {*CAPTURE_READERS.values(), RAW_BYTES}:
-        importlib.import_module(target.partition(":")[0])
+def decode_on_worker(job: CaptureJob) -> CaptureResult:
+    """``decode_capture`` as a Dask task: its progress goes to the client as events."""
+    from distributed import get_worker
+
+    worker = get_worker()
+
+    def progress(position: int, records: int) -> None:
+        worker.log_event(PROGRESS_TOPIC, [job.path, position, records])
+
+    # through the scheduler: twice a second per worker is enough for a bar
+    return decode_capture(job, Throttled(progress, WORKER_PROGRESS_S))
 
 
 def run_on_dask(
@@ -103,18 +126,28 @@ def run_on_dask(
     options: DaskOptions,
     report: Report,
     started: Callable[[Any], None] | None = None,
+    progress: CaptureProgress | None = None,
+    interrupted: Callable[[], bool] = lambda: False,
 ) -> None:
     """Every capture as a Dask task, results reported as they complete (``started``: given the
-    client once the cluster is up)."""
+    client once the cluster is up; ``progress``: told how far the workers have got with each
+    capture; ``interrupted``: asked while waiting, KeyboardInterrupt when it says so)."""
     from dask.distributed import as_completed
 
     with _client(options) as client:
         if started is not None:
             started(client)
-        futures = client.map(decode_capture, jobs, pure=False)
+        if progress is not None:
+            client.subscribe_topic(PROGRESS_TOPIC, lambda event: progress(*event[1]))
+        futures = client.map(decode_on_worker, jobs, pure=False)
         by_key = {f.key: job for f, job in zip(futures, jobs, strict=True)}
-        for future in as_completed(futures):
-            report(_result(future, by_key[future.key]))
+        waiting = as_completed(futures)
+        while not waiting.is_empty():
+            for future in waiting.next_batch(block=False):
+                report(_result(future, by_key[future.key]))
+            if interrupted():
+                raise KeyboardInterrupt
+            time.sleep(POLL_S)
 
 
 def _result(future: Any, job: CaptureJob) -> CaptureResult:

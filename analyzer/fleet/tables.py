@@ -8,14 +8,18 @@ and readers (pyarrow datasets, DuckDB, polars with ``hive_partitioning``) add th
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Sequence
 from typing import Any, Final
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
 from decoders.registers import fault_text, state_text
 
+from .. import native_parquet
+from ..batches import SampleBatch
 from ..model import StateSample
 from ..parquet_schema import SCHEMA as RECORD_SCHEMA
 from ..parquet_schema import described_field, millimetres
@@ -77,8 +81,19 @@ STATES_SCHEMA: Final = pa.schema(
     metadata={b"eg2scope": b"fleet states"},
 )
 _STATE_KEYS: Final = [f.name for f in STATES_SCHEMA if f.name not in (PATH, HASH)]
-_TYPES_SCHEMA: Final = [pa.field(BUS, STR), *(STATES_SCHEMA.field(k) for k in _STATE_KEYS)]
-_TYPES: Final = {f.name: f.type for f in _TYPES_SCHEMA}
+#: the states/ columns written dictionary-encoded: a gripper's values repeat from sample to
+#: sample (half the size, and faster to write); times, seqs, latencies and counters do not
+STATE_DICTIONARY: Final = tuple(
+    k for k in _STATE_KEYS if k not in ("t", "seq", "latency_ms", "frames", "errors", "unanswered")
+)
+_TYPES_SCHEMA: Final = pa.schema(
+    [pa.field(BUS, STR), *(STATES_SCHEMA.field(k) for k in _STATE_KEYS)]
+)
+#: what a state sample holds (its bus kept, for partitioning), the columns the native core
+#: fills (analyzer/native_parquet.py describes them to it); the words and millimetres are
+#: derived from them (``_derived``)
+_DERIVED: Final = ("opening_mm", "target_mm", "state_text", "fault_text")
+STATE_COLUMNS: Final = pa.schema([f for f in _TYPES_SCHEMA if f.name not in _DERIVED])
 
 DEVICE: Final = pa.struct([("bus", STR), ("protocol", STR), ("device", INT)])
 LATENCY: Final = ("latency_p50_ms", "latency_p95_ms", "latency_max_ms")
@@ -135,17 +150,47 @@ def utc_day(t: float) -> str:
     return dt.datetime.fromtimestamp(t, dt.UTC).strftime("%Y-%m-%d")
 
 
-def days(t: pa.ChunkedArray | pa.Array, fallback: str) -> pa.Array:
-    """Each row's UTC day from its time in seconds; ``fallback`` where there is no time."""
-    stamps = pc.cast(pc.multiply(t, 1e6), INT)
-    text = pc.strftime(pc.cast(stamps, pa.timestamp("us", "UTC")), format="%Y-%m-%d")
+# the times a day can be told of (0001-01-01 to 9999-12-31 UTC); others are no clock's.
+# Scalars for compute functions are made once, typed: pyarrow infers the type of a Python
+# value anew at every call (and tries to import dateutil each time)
+_FIRST_S: Final = pa.scalar(-62_135_596_800.0, FLOAT)
+_END_S: Final = pa.scalar(253_402_300_800.0, FLOAT)
+_MICRO: Final = pa.scalar(1e6, FLOAT)
+_NO_TIME: Final = pa.scalar(None, FLOAT)
+
+
+def days(t: pa.ChunkedArray | pa.Array, fallback: str) -> str | pa.Array | pa.ChunkedArray:
+    """Each row's UTC day from its time in seconds (rounded to the microsecond, as
+    ``datetime.fromtimestamp`` does); ``fallback`` where there is no time, or one no calendar
+    holds (NaN, infinite, beyond year 9999). One string when every row has the same day (the
+    usual batch: its first and last times fall on one day)."""
+    if t.null_count == len(t):
+        return fallback
+    if not t.null_count and math.isfinite(pc.sum(t).as_py()):  # no NaN nor infinity
+        first, last = pc.min_max(t).values()
+        ends = _days(pa.array([first.as_py(), last.as_py()], FLOAT), fallback).to_pylist()
+        if ends[0] == ends[1] != fallback:
+            return str(ends[0])
+    return _days(t, fallback)
+
+
+def _days(t: pa.ChunkedArray | pa.Array, fallback: str) -> pa.Array | pa.ChunkedArray:
+    inside = pc.and_(pc.greater_equal(t, _FIRST_S), pc.less(t, _END_S))
+    micros = pc.round(
+        pc.multiply(pc.if_else(inside, t, _NO_TIME), _MICRO), round_mode="half_to_even"
+    )
+    stamps = pc.cast(pc.cast(micros, INT), pa.timestamp("us", "UTC"))
+    text = pc.cast(pc.cast(stamps, pa.date32()), STR)  # ISO 8601: YYYY-MM-DD
     return pc.fill_null(text, fallback)
 
 
-def states_table(samples: list[StateSample]) -> pa.Table:
+def states_table(samples: Sequence[StateSample]) -> pa.Table:
     """State samples as rows, the fields of ``StateSample.to_dict()`` (``bus`` kept, for
-    partitioning; the source columns not yet). Built column by column: one sample per reading
-    makes this the busiest table."""
+    partitioning; the source columns not yet). A native ``SampleBatch`` fills the columns
+    itself (no object per sample); a list is read column by column."""
+    if isinstance(samples, SampleBatch):
+        _rows, parts = samples.arrow(native_parquet.columns(STATE_COLUMNS))
+        return state_rows(native_parquet.batch_table(parts, STATE_COLUMNS))
     values = [s.values for s in samples]
     columns: dict[str, Any] = {
         BUS: [s.bus for s in samples],
@@ -156,26 +201,61 @@ def states_table(samples: list[StateSample]) -> pa.Table:
         **{key: [v[key] for v in values] for key in VALUE_KEYS},
         "changed": [list(s.changed) for s in samples],
     }
-    arrays = {key: pa.array(col, _TYPES[key]) for key, col in columns.items()}
-    arrays["opening_mm"] = millimetres(arrays["opening"])
-    arrays["target_mm"] = millimetres(arrays["target_opening"])
-    arrays["state_text"] = pa.array(_words(columns["state"], state_text), STR)
-    arrays["fault_text"] = pa.array(_words(columns["fault"], fault_text, []), STRINGS)
-    names = [BUS, *_STATE_KEYS]
-    return pa.table([arrays[n] for n in names], schema=pa.schema(_TYPES_SCHEMA))
+    arrays = [pa.array(columns[f.name], f.type) for f in STATE_COLUMNS]
+    return state_rows(pa.table(arrays, schema=STATE_COLUMNS))
 
 
-def _words(codes: list[int | None], words: Callable[[int], Any], unknown: Any = None) -> list[Any]:
+def state_rows(samples: pa.Table) -> pa.Table:
+    """The ``states/`` rows (bus kept) of samples in ``STATE_COLUMNS``: with the openings in
+    millimetres and the state's and faults' words, as ``StateSample.to_dict()`` derives them."""
+    derived = {
+        "opening_mm": millimetres(samples.column("opening")),
+        "target_mm": millimetres(samples.column("target_opening")),
+        "state_text": _words(samples.column("state"), state_text, STR),
+        "fault_text": _words(samples.column("fault"), fault_text, STRINGS, unknown=[]),
+    }
+    columns = [derived[f.name] if f.name in derived else samples[f.name] for f in _TYPES_SCHEMA]
+    return pa.table(columns, schema=_TYPES_SCHEMA)
+
+
+def _words(
+    codes: pa.ChunkedArray,
+    words: Callable[[int], Any],
+    type_: pa.DataType,
+    unknown: Any = None,
+) -> pa.ChunkedArray:
     """A state's or fault's words per row (as ``derived`` gives them), each distinct code
     looked up once; ``unknown`` where there is no code."""
-    table = {code: words(code) for code in set(codes) if code is not None}
-    return [unknown if code is None else table[code] for code in codes]
+    distinct = pc.unique(codes).drop_null()
+    table = pa.array([words(code) for code in distinct.to_pylist()], type_)
+    found = pc.take(table, pc.index_in(codes, value_set=distinct))
+    if unknown is None:
+        return found
+    return pc.if_else(pc.is_null(codes), pa.scalar(unknown, type_), found)
 
 
 def with_source(table: pa.Table, path: str, content_hash: str) -> pa.Table:
     rows = table.num_rows
-    table = table.append_column(_SOURCE[0], pa.repeat(path, rows).cast(STR))
-    return table.append_column(_SOURCE[1], pa.repeat(content_hash, rows).cast(STR))
+    table = table.append_column(_SOURCE[0], _repeated(path, rows))
+    return table.append_column(_SOURCE[1], _repeated(content_hash, rows))
+
+
+_REPEATED: dict[str, pa.Array] = {}
+
+
+def _repeated(text: str, rows: int) -> pa.Array:
+    """``text`` on every row: a slice of one array per text (a capture's path and hash), made
+    from its bytes (converting Python objects looks for optional libraries every time)."""
+    array = _REPEATED.get(text)
+    if array is None or len(array) < rows:
+        if len(_REPEATED) > 4:
+            _REPEATED.clear()  # the captures before
+        size = max(rows, 1 << 16)
+        data = text.encode()
+        offsets = np.arange(0, (size + 1) * len(data), len(data), dtype=np.int32)
+        buffers = [None, pa.py_buffer(offsets), pa.py_buffer(data * size)]
+        array = _REPEATED[text] = pa.Array.from_buffers(STR, size, buffers)
+    return array.slice(0, rows)
 
 
 def captures_table(row: dict[str, Any]) -> pa.Table:

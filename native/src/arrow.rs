@@ -18,8 +18,10 @@
 //! most rows, and a column with no value in a batch is handed out as "all null", with no
 //! buffer at all.
 
+use crate::arrow_states::{Row, StateColumns};
 use crate::json::{push_map, push_str, push_value};
 use crate::model::{Record, Value};
+use crate::tracker::Tracker;
 use std::sync::{Arc, Mutex};
 
 // -- the schema as Python describes it --------------------------------------------------------
@@ -91,6 +93,19 @@ impl Bits {
         self.len += 1;
     }
 
+    /// `n` one bits.
+    fn push_ones(&mut self, mut n: usize) {
+        while n > 0 && !self.len.is_multiple_of(8) {
+            self.push(true);
+            n -= 1;
+        }
+        self.bytes.resize(self.bytes.len() + n / 8, 0xFF);
+        self.len += n / 8 * 8;
+        for _ in 0..n % 8 {
+            self.push(true);
+        }
+    }
+
     /// `n` zero bits.
     fn push_zeros(&mut self, n: usize) {
         self.len += n;
@@ -126,8 +141,9 @@ enum Data {
 }
 
 /// One Arrow array under construction.
-struct Column {
-    ty: Type,
+pub(crate) struct Column {
+    pub(crate) ty: Type,
+    /// the validity bitmap, kept only once a null is pushed (Arrow needs none without nulls)
     valid: Bits,
     /// values pushed (null or not)
     len: usize,
@@ -138,7 +154,7 @@ struct Column {
 
 impl Column {
     /// The column described at `specs[*at]` (and its children, after it); `*at` moves past them.
-    fn build(specs: &[ColumnSpec], at: &mut usize) -> Result<Column, String> {
+    pub(crate) fn build(specs: &[ColumnSpec], at: &mut usize) -> Result<Column, String> {
         let spec = specs.get(*at).ok_or("the column description ends early")?;
         *at += 1;
         let data = match spec.ty {
@@ -193,7 +209,10 @@ impl Column {
         })
     }
 
-    fn push_null(&mut self) {
+    pub(crate) fn push_null(&mut self) {
+        if self.nulls == 0 {
+            self.valid.push_ones(self.len); // the bitmap, kept from the first null on
+        }
         self.valid.push(false);
         self.len += 1;
         self.nulls += 1;
@@ -235,12 +254,14 @@ impl Column {
 
     #[inline]
     fn mark_valid(&mut self) {
-        self.valid.push(true);
+        if self.nulls > 0 {
+            self.valid.push(true);
+        }
         self.len += 1;
     }
 
     #[inline]
-    fn push_int(&mut self, v: i64) {
+    pub(crate) fn push_int(&mut self, v: i64) {
         if let Data::Int(vals) = &mut self.data {
             vals.push(v);
             self.mark_valid();
@@ -261,8 +282,17 @@ impl Column {
         }
     }
 
+    /// A float as it is (NaN and infinities kept: `pa.array` of Python floats keeps them).
     #[inline]
-    fn push_str(&mut self, s: &str) {
+    pub(crate) fn push_raw_float(&mut self, v: f64) {
+        if let Data::Float(vals) = &mut self.data {
+            vals.push(v);
+            self.mark_valid();
+        }
+    }
+
+    #[inline]
+    pub(crate) fn push_str(&mut self, s: &str) {
         if let Data::Str { offsets, bytes } = &mut self.data {
             bytes.extend_from_slice(s.as_bytes());
             offsets.push(bytes.len() as i32);
@@ -284,8 +314,19 @@ impl Column {
         }
     }
 
+    /// A list of strings, from an iterator (no list in between).
+    pub(crate) fn push_strs<'a>(&mut self, items: impl Iterator<Item = &'a str>) {
+        if let Data::List { offsets, child } = &mut self.data {
+            for s in items {
+                child.push_str(s);
+            }
+            offsets.push(child.len as i32);
+            self.mark_valid();
+        }
+    }
+
     /// A list of strings (errors, warnings, flags).
-    fn push_str_list<S: AsRef<str>>(&mut self, items: &[S]) {
+    pub(crate) fn push_str_list<S: AsRef<str>>(&mut self, items: &[S]) {
         if let Data::List { offsets, child } = &mut self.data {
             for s in items {
                 child.push_str(s.as_ref());
@@ -363,7 +404,7 @@ impl Column {
     }
 
     /// Hand out the column (padded to `rows`) and its children, depth first, then empty it.
-    fn take(&mut self, rows: usize, out: &mut dyn FnMut(Buffers<'_>)) {
+    pub(crate) fn take(&mut self, rows: usize, out: &mut dyn FnMut(Buffers<'_>)) {
         if self.all_null() {
             self.skip(rows, out);
             return;
@@ -574,7 +615,7 @@ pub struct RecordColumns {
 }
 
 /// Whether a column of type `ty` takes a list of strings.
-fn is_str_list(col: &Column) -> bool {
+pub(crate) fn is_str_list(col: &Column) -> bool {
     matches!(&col.data, Data::List { child, .. } if child.ty == Type::Str)
 }
 
@@ -792,9 +833,49 @@ fn add_other(json: &mut String, count: &mut usize, key: &str, value: &Value) {
 
 // -- as a writer of the pipeline ------------------------------------------------------------------
 
+/// What the pipeline's Arrow writer fills: the records' columns and, for the fleet dataset, the
+/// state samples a Tracker makes of the same records, in the order the session's Tracker sees
+/// them (the order they are written).
+pub struct ArrowTables {
+    pub records: RecordColumns,
+    pub states: Option<(Tracker, StateColumns)>,
+    /// why a sample could not be written (the run ends there)
+    pub failure: Option<String>,
+}
+
+impl ArrowTables {
+    pub fn new(records: RecordColumns, states: Option<StateColumns>) -> Self {
+        ArrowTables {
+            records,
+            states: states.map(|columns| (Tracker::new(true), columns)),
+            failure: None,
+        }
+    }
+
+    fn push(&mut self, rec: &Record) {
+        self.records.push(rec);
+        if let Some((tracker, columns)) = &mut self.states {
+            let pushed = tracker.update_with(rec, |state, changed| {
+                columns.push_row(&Row {
+                    t: rec.t,
+                    bus: &rec.bus,
+                    device: state.device,
+                    protocol: state.protocol,
+                    seq: rec.seq,
+                    values: &state.values,
+                    changed,
+                })
+            });
+            if let Some(Err(why)) = pushed {
+                self.failure.get_or_insert(why);
+            }
+        }
+    }
+}
+
 /// The pipeline's writer (writers.rs `RecordWriter`) that puts records into shared columns
 /// instead of bytes: the Python binding takes the columns out between batches.
-pub struct ArrowWriter(pub Arc<Mutex<RecordColumns>>);
+pub struct ArrowWriter(pub Arc<Mutex<ArrowTables>>);
 
 impl crate::writers::RecordWriter for ArrowWriter {
     fn write(&mut self, rec: &Record, _out: &mut Vec<u8>) {
@@ -862,6 +943,27 @@ mod tests {
             .chunks(8)
             .map(|c| i64::from_ne_bytes(c.try_into().unwrap()))
             .collect()
+    }
+
+    #[test]
+    fn the_validity_bitmap_begins_at_the_first_null() {
+        for valid_first in [0, 1, 7, 8, 9, 17] {
+            let specs = [ColumnSpec::new("x", Type::Int, 0)];
+            let mut col = Column::build(&specs, &mut 0).unwrap();
+            for i in 0..valid_first {
+                col.push_int(i as i64);
+            }
+            col.push_null();
+            col.push_int(1);
+            let want: Vec<bool> = (0..valid_first)
+                .map(|_| true)
+                .chain([false, true])
+                .collect();
+            let got: Vec<bool> = (0..want.len())
+                .map(|i| col.valid.bytes[i / 8] >> (i % 8) & 1 == 1)
+                .collect();
+            assert_eq!((got, col.valid.len, col.nulls), (want, valid_first + 2, 1));
+        }
     }
 
     #[test]

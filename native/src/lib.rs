@@ -6,6 +6,7 @@
 
 mod alloc;
 pub mod arrow;
+pub mod arrow_states;
 pub mod can;
 pub mod candump;
 pub mod detect;

@@ -10,7 +10,8 @@
 //! A child module of python.rs: it shares its errors, options and GIL helpers.
 
 use super::{os_error, protocol_by_name, Unsupported};
-use crate::arrow::{ArrowWriter, Buffers, ColumnSpec, RecordColumns, Type};
+use crate::arrow::{ArrowTables, ArrowWriter, Buffers, ColumnSpec, RecordColumns, Type};
+use crate::arrow_states::StateColumns;
 use crate::pipeline::{DecodeOptions, DecodeRun};
 use crate::writers::{Format, TextOptions};
 use pyo3::ffi;
@@ -28,7 +29,7 @@ use std::thread::JoinHandle;
 const BATCH_ROWS: u64 = 16_384;
 
 /// One column of a batch, owned (arrow.rs `Buffers`).
-enum Part {
+pub(super) enum Part {
     AllNull(usize),
     Data {
         len: usize,
@@ -39,11 +40,78 @@ enum Part {
     },
 }
 
+impl Part {
+    /// A column as `take` hands it out, copied out of the builders.
+    fn own(b: Buffers<'_>) -> Part {
+        match b {
+            Buffers::AllNull(n) => Part::AllNull(n),
+            Buffers::Data {
+                len,
+                nulls,
+                validity,
+                values,
+                bytes,
+            } => Part::Data {
+                len,
+                nulls,
+                validity: validity.map(<[u8]>::to_vec),
+                values: values.to_vec(),
+                bytes: bytes.map(<[u8]>::to_vec),
+            },
+        }
+    }
+}
+
+/// Columns as Python takes them: per column its length (all null) or `(length, null_count,
+/// validity or None, values, bytes or None)` (buffer objects, no copy).
+pub(super) fn parts_to_py<'py>(py: Python<'py>, parts: Vec<Part>) -> PyResult<Bound<'py, PyList>> {
+    let list = PyList::empty(py);
+    for part in parts {
+        let item = match part {
+            Part::AllNull(n) => n.into_pyobject(py)?.into_any(),
+            Part::Data {
+                len,
+                nulls,
+                validity,
+                values,
+                bytes,
+            } => (len, nulls, validity.map(Buf), Buf(values), bytes.map(Buf))
+                .into_pyobject(py)?
+                .into_any(),
+        };
+        list.append(item)?;
+    }
+    Ok(list)
+}
+
+/// State samples as columns (arrow_states.rs), owned: `SampleBatch.arrow` and the fleet runs.
+pub(super) fn state_parts(columns: &mut StateColumns) -> (usize, Vec<Part>) {
+    let rows = columns.rows();
+    let mut parts = Vec::new();
+    columns.take(&mut |b| parts.push(Part::own(b)));
+    (rows, parts)
+}
+
+/// A column description as Python gives it: `(name, type, number of children)`, depth first.
+pub(super) fn column_specs(columns: &[(String, String, usize)]) -> PyResult<Vec<ColumnSpec>> {
+    columns
+        .iter()
+        .map(|(name, ty, children)| {
+            let ty = Type::by_name(ty)
+                .ok_or_else(|| Unsupported::new_err(format!("column {name}: type {ty}")))?;
+            Ok(ColumnSpec::new(name, ty, *children))
+        })
+        .collect()
+}
+
 /// What the decoding thread sends.
 enum Msg {
-    Batch(usize, Vec<Part>),
+    /// records, and the state samples made of them (when asked for)
+    Batch(usize, Vec<Part>, Option<(usize, Vec<Part>)>),
     /// the end, with the input's damage
     End(Vec<String>),
+    /// a state sample that could not be written: the run ends
+    Failed(String),
 }
 
 /// What Python may read while the thread runs.
@@ -92,11 +160,14 @@ impl Buf {
 }
 
 /// `ArrowRun(path, columns, families, other, values_key, protocol=None, bus=None, device=None,
-/// errors_only=False, batch_rows=16384)`: `columns` describes the parse schema depth first as
-/// `(name, type, number of children)` (type: int64, float64, string, bool, list, struct);
-/// `families`: `(protocol, column)` pairs; `other`: the column of what no column holds.
-/// Iterate it for `(rows, columns)`: per column of the description, its length (all null) or
-/// `(length, null_count, validity or None, values, bytes or None)` (buffer objects).
+/// errors_only=False, batch_rows=16384, states=None)`: `columns` describes the parse schema
+/// depth first as `(name, type, number of children)` (type: int64, float64, string, bool, list,
+/// struct); `families`: `(protocol, column)` pairs; `other`: the column of what no column
+/// holds; `states`: the state sample columns (arrow_states.rs) to fill from a Tracker fed the
+/// records, or None. Iterate it for `(rows, columns, states)`: per column of the description,
+/// its length (all null) or `(length, null_count, validity or None, values, bytes or None)`
+/// (buffer objects); `states` None, or `(samples, columns)` laid out the same way. A sample
+/// that does not fit its columns raises ValueError.
 #[pyclass(name = "ArrowRun", module = "analyzer._native")]
 struct PyArrowRun {
     batches: Mutex<Option<Receiver<Msg>>>,
@@ -110,7 +181,7 @@ struct PyArrowRun {
 /// The decoding thread: batches of `max` records as owned columns, until the end or `stop`.
 fn produce(
     mut run: DecodeRun,
-    shared: Arc<Mutex<RecordColumns>>,
+    shared: Arc<Mutex<ArrowTables>>,
     max: u64,
     progress: Arc<Progress>,
     tx: std::sync::mpsc::SyncSender<Msg>,
@@ -123,30 +194,19 @@ fn produce(
         progress
             .written
             .store(run.records_written(), Ordering::Relaxed);
-        let mut columns = shared.lock().unwrap_or_else(|e| e.into_inner());
-        let rows = columns.rows();
+        let mut tables = shared.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(why) = tables.failure.take() {
+            let _ = tx.send(Msg::Failed(why));
+            return;
+        }
+        let rows = tables.records.rows();
         if rows > 0 {
             let mut parts = Vec::new();
-            columns.take(&mut |b| {
-                parts.push(match b {
-                    Buffers::AllNull(n) => Part::AllNull(n),
-                    Buffers::Data {
-                        len,
-                        nulls,
-                        validity,
-                        values,
-                        bytes,
-                    } => Part::Data {
-                        len,
-                        nulls,
-                        validity: validity.map(<[u8]>::to_vec),
-                        values: values.to_vec(),
-                        bytes: bytes.map(<[u8]>::to_vec),
-                    },
-                })
-            });
-            drop(columns);
-            if tx.send(Msg::Batch(rows, parts)).is_err() || progress.stop.load(Ordering::Relaxed) {
+            tables.records.take(&mut |b| parts.push(Part::own(b)));
+            let states = tables.states.as_mut().map(|(_, cols)| state_parts(cols));
+            drop(tables);
+            let sent = tx.send(Msg::Batch(rows, parts, states));
+            if sent.is_err() || progress.stop.load(Ordering::Relaxed) {
                 return; // Python went away
             }
         }
@@ -163,7 +223,7 @@ fn produce(
 impl PyArrowRun {
     #[new]
     #[pyo3(signature = (path, columns, families, other, values_key, protocol=None, bus=None,
-                        device=None, errors_only=false, batch_rows=BATCH_ROWS))]
+                        device=None, errors_only=false, batch_rows=BATCH_ROWS, states=None))]
     #[allow(clippy::too_many_arguments)] // the decode command's options, by keyword
     fn new(
         py: Python<'_>,
@@ -177,16 +237,19 @@ impl PyArrowRun {
         device: Option<i64>,
         errors_only: bool,
         batch_rows: u64,
+        states: Option<Vec<(String, String, usize)>>,
     ) -> PyResult<Self> {
-        let mut specs = Vec::with_capacity(columns.len());
-        for (name, ty, children) in &columns {
-            let ty = Type::by_name(ty)
-                .ok_or_else(|| Unsupported::new_err(format!("column {name}: type {ty}")))?;
-            specs.push(ColumnSpec::new(name, ty, *children));
-        }
-        let built = RecordColumns::new(&specs, &families, other, values_key)
+        let specs = column_specs(&columns)?;
+        let records = RecordColumns::new(&specs, &families, other, values_key)
             .map_err(Unsupported::new_err)?;
-        let shared = Arc::new(Mutex::new(built));
+        let states = match states {
+            Some(columns) => {
+                let specs = column_specs(&columns)?;
+                Some(StateColumns::new(&specs).map_err(Unsupported::new_err)?)
+            }
+            None => None,
+        };
+        let shared = Arc::new(Mutex::new(ArrowTables::new(records, states)));
         let opts = DecodeOptions {
             protocol: protocol_by_name(protocol)?,
             bus,
@@ -262,24 +325,17 @@ impl PyArrowRun {
         });
         *self.batches.lock().unwrap_or_else(|e| e.into_inner()) = Some(rx);
         match msg {
-            Ok(Msg::Batch(rows, parts)) => {
-                let list = PyList::empty(py);
-                for part in parts {
-                    let item = match part {
-                        Part::AllNull(n) => n.into_pyobject(py)?.into_any(),
-                        Part::Data {
-                            len,
-                            nulls,
-                            validity,
-                            values,
-                            bytes,
-                        } => (len, nulls, validity.map(Buf), Buf(values), bytes.map(Buf))
-                            .into_pyobject(py)?
-                            .into_any(),
-                    };
-                    list.append(item)?;
-                }
-                Ok(Some((rows, list).into_pyobject(py)?))
+            Ok(Msg::Batch(rows, parts, states)) => {
+                let records = parts_to_py(py, parts)?;
+                let states = match states {
+                    Some((n, parts)) => (n, parts_to_py(py, parts)?).into_pyobject(py)?.into_any(),
+                    None => py.None().into_bound(py),
+                };
+                Ok(Some((rows, records, states).into_pyobject(py)?))
+            }
+            Ok(Msg::Failed(why)) => {
+                self.finish(py);
+                Err(pyo3::exceptions::PyValueError::new_err(why))
             }
             Ok(Msg::End(errors)) => {
                 self.finish(py);

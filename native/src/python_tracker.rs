@@ -14,7 +14,10 @@
 //!
 //! A child module of python.rs.
 
+use super::python_arrow::{column_specs, parts_to_py, state_parts};
 use super::python_live::RecordBatch;
+use super::Unsupported;
+use crate::arrow_states::StateColumns;
 use crate::flags::{OUT_OF_RANGE, UNANSWERED};
 use crate::hash::FastMap;
 use crate::model::{
@@ -327,6 +330,23 @@ impl SampleBatch {
             out.push(PyBytes::new(py, buf.as_bytes()));
         }
         PyList::new(py, out)
+    }
+
+    /// The samples as Arrow columns (arrow_states.rs; `columns` described as `ArrowRun`'s
+    /// `states`): `(rows, columns)`, as `ArrowRun` hands out the states of a batch. ValueError
+    /// for a value its column does not take.
+    fn arrow<'py>(
+        &self,
+        py: Python<'py>,
+        columns: Vec<(String, String, usize)>,
+    ) -> PyResult<(usize, Bound<'py, PyList>)> {
+        let specs = column_specs(&columns)?;
+        let mut built = StateColumns::new(&specs).map_err(Unsupported::new_err)?;
+        for s in &self.samples {
+            built.push(s).map_err(PyValueError::new_err)?;
+        }
+        let (rows, parts) = state_parts(&mut built);
+        Ok((rows, parts_to_py(py, parts)?))
     }
 
     /// `sample.t` per sample.

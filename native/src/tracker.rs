@@ -180,7 +180,7 @@ pub struct Changed {
 }
 
 impl Changed {
-    fn add(&mut self, field: usize) {
+    pub(crate) fn add(&mut self, field: usize) {
         let field = field as u8;
         if !self.keys[..self.len as usize].contains(&field) {
             self.keys[self.len as usize] = field;
@@ -291,6 +291,34 @@ impl Tracker {
     /// Fold one record (`Tracker.update`); the sample it made, if it set anything and samples
     /// are asked for.
     pub fn update(&mut self, rec: &Record) -> Option<Sample> {
+        let (i, changed) = self.fold(rec)?;
+        let st = &self.states[i];
+        Some(Sample {
+            t: rec.t,
+            bus: rec.bus.clone(),
+            device: st.device,
+            protocol: st.protocol,
+            seq: rec.seq,
+            changed,
+            values: st.values.clone(),
+        })
+    }
+
+    /// `update` for a writer of samples, without a copy of the state: `write` is given the
+    /// gripper's state after the record and the fields the record set (the sample's time and
+    /// seq are the record's), when it made a sample.
+    pub fn update_with<R>(
+        &mut self,
+        rec: &Record,
+        write: impl FnOnce(&DeviceState, Changed) -> R,
+    ) -> Option<R> {
+        let (i, changed) = self.fold(rec)?;
+        Some(write(&self.states[i], changed))
+    }
+
+    /// Fold one record into its gripper's state; the state's index and the fields set, when
+    /// that makes a sample.
+    fn fold(&mut self, rec: &Record) -> Option<(usize, Changed)> {
         if rec.kind != FRAME {
             return None;
         }
@@ -350,15 +378,7 @@ impl Tracker {
         if changed.is_empty() || !self.samples {
             return None;
         }
-        Some(Sample {
-            t: rec.t,
-            bus: rec.bus.clone(),
-            device,
-            protocol: st.protocol,
-            seq: rec.seq,
-            changed,
-            values: st.values.clone(),
-        })
+        Some((i, changed))
     }
 
     /// The samples of a run of records, in order (`Tracker.update_many`).

@@ -3,6 +3,7 @@ checked against what ``decode --format parquet`` and ``stats`` give for each fil
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import shutil
 from collections import Counter
@@ -13,9 +14,8 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
-from fleet_folder import make_fleet
 
-from analyzer import cli
+from analyzer import cli, native
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import content_hash, expand
 from analyzer.listener import Listener
@@ -25,18 +25,13 @@ from analyzer.session import Session
 from analyzer.sources.capture import open_capture
 from analyzer.sources.source import CaptureSource
 
-GOOD = ("candump", "candump_gz", "asc", "mcap", "serial", "modbus")
+GOOD = ("candump", "candump_gz", "asc", "blf", "mcap", "demo", "serial", "modbus")
 
 
 def batch(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
     code = cli.main(["batch", *argv, "--no-progress"])
     out, err = capsys.readouterr()
     return code, out, err
-
-
-@pytest.fixture(scope="module")
-def fleet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    return make_fleet(tmp_path_factory.mktemp("fleet"), frames=1500)
 
 
 @pytest.fixture(scope="module")
@@ -147,6 +142,16 @@ def test_partitions_are_day_and_bus(fleet: dict[str, Path], dataset: Path) -> No
     assert ("2025-11-24", "can1") in days  # the MCAP recording's bus
     for path in (dataset / layout.RECORDS).rglob("*.parquet"):
         assert "bus" not in pq.read_schema(path).names  # the partition key is the folder
+    # the UTC day of each record's time (the demo's and python-can's have fractions of a
+    # microsecond), in records/ and states/
+    for name in (layout.RECORDS, layout.STATES):
+        whole = table(dataset, name)
+        timed = whole.filter(pa.compute.is_valid(whole["t"]))
+        assert timed.num_rows > 1000
+        for t, day in zip(timed["t"].to_pylist(), timed["day"].to_pylist(), strict=True):
+            assert str(day) == dt.datetime.fromtimestamp(t, dt.UTC).strftime("%Y-%m-%d")
+    demo = rows_of(dataset, layout.RECORDS, fleet["demo"])
+    assert set(demo["t"].to_pylist()) != {round(t, 6) for t in demo["t"].to_pylist()}
     # raw dumps have no clock: the day their file was written
     serial_day = rows_of(dataset, layout.RECORDS, fleet["serial"])
     assert serial_day.num_rows and serial_day["t"].null_count == serial_day.num_rows
@@ -187,7 +192,7 @@ def test_a_second_run_skips_everything_and_changes_nothing(
     before = {p: p.stat().st_mtime_ns for p in root.rglob("*.parquet")}
     code, out, _ = batch(capsys, *inputs, "-o", str(root), "--workers", "1")
     assert code == 0
-    assert "already in the dataset │     6" in out
+    assert f"already in the dataset │     {len(GOOD)}" in out
     assert {p: p.stat().st_mtime_ns for p in root.rglob("*.parquet")} == before
     # a copy of a capture elsewhere has the same content: skipped too
     copy = tmp_path / "copy.bin"
@@ -278,3 +283,22 @@ def test_inputs_are_never_changed(
     root = fleet["candump"].parents[2]
     assert batch(capsys, str(root), "-o", str(tmp_path / "d"), "--workers", "1")[0] == 1
     assert snapshot() == before
+
+
+def test_engine_native_without_the_core_is_a_usage_error(
+    fleet: dict[str, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(native, "_native", None)  # as on a machine without Rust
+    monkeypatch.setattr(native, "WHY_NOT", "not built: no Rust toolchain at install time")
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["batch", str(fleet["candump"]), "-o", str(tmp_path / "d"), "--engine", "native"])
+    assert exit_.value.code == 2
+    assert "--engine native: the native core is not built" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+    # the default goes on in Python, with the same dataset as the native core's (elsewhere)
+    code = cli.main(["batch", str(fleet["candump"]), "-o", str(tmp_path / "d"), "--workers", "1"])
+    assert code == 0
+    assert layout.done_hashes(tmp_path / "d") == {content_hash(fleet["candump"])}
