@@ -550,7 +550,7 @@ class PythonCanFileReader(_FileReaderBase):
         if getattr(self._reader, "start_time", None) == 0.0:
             self._relative = True
             self._warning(
-                f"timestamps are relative to the start of the capture (no start date in the file)"
+                "timestamps are relative to the start of the capture (no start date in the file)"
             )
 
     def _check_blf(self) -> None:
@@ -561,7 +561,7 @@ class PythonCanFileReader(_FileReaderBase):
         actual = self.path.stat().st_size
         if stated == BLF_HEADER_SIZE and actual > stated:
             self._warning(
-                f"the writer did not finish the file (its header was never "
+                "the writer did not finish the file (its header was never "
                 "updated); read what is there"
             )
         elif actual < stated:
@@ -570,7 +570,7 @@ class PythonCanFileReader(_FileReaderBase):
                 f"has {actual}; frames after the cut are lost"
             )
         elif not _blf_padding(getattr(reader, "_tail", b"")):
-            self._error(f"the last object is incomplete")
+            self._error("the last object is incomplete")
 
 
 def _blf_padding(tail: bytes) -> bool:
