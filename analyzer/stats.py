@@ -129,10 +129,12 @@ class CaptureStats:
 
     def add(self, rec: Record) -> None:
         self.records += 1
-        if rec.t is not None:
-            if self.first_t is None:
-                self.first_t = rec.t
-            self.last_t = rec.t
+        t = rec.t
+        if t is not None:  # the span of the capture: records of several buses come per bus
+            if self.first_t is None or t < self.first_t:
+                self.first_t = t
+            if self.last_t is None or t > self.last_t:
+                self.last_t = t
         self.by_protocol[rec.protocol] += 1
         if rec.kind == GARBAGE:
             self.bytes_garbage += rec.length
