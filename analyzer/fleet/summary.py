@@ -72,10 +72,11 @@ class RecordSummary:
         stats = self._stats
         stats.records += table.num_rows
         times = table.column("t").drop_null()
-        if len(times):
-            if stats.first_t is None:
-                stats.first_t = times[0].as_py()
-            stats.last_t = times[-1].as_py()
+        if len(times):  # the span (records of several buses come per bus), as Stats.add
+            low, high = pc.min_max(times).values()
+            first, last = low.as_py(), high.as_py()
+            stats.first_t = first if stats.first_t is None else min(stats.first_t, first)
+            stats.last_t = last if stats.last_t is None else max(stats.last_t, last)
         stats.by_protocol.update(_counts(table.column("protocol")))
         kind = table.column("kind")
         frames = pc.equal(kind, _FRAME)
