@@ -248,6 +248,11 @@ class RerunOutput:
 
         try:
             with signals_as_interrupt():
+                # said once the handlers are in place: a Ctrl-C it prompts is a clean stop
+                print(
+                    "eg2scope: everything is sent to the web viewer; Ctrl-C to stop it",
+                    file=self.out,
+                )
                 while self.server.poll() is None:
                     time.sleep(0.2)
         except KeyboardInterrupt:

@@ -149,6 +149,7 @@ def test_serve_web_binds_to_localhost_only_and_prints_a_webgl_url_once(tmp_path:
         with urllib.request.urlopen(url, timeout=10) as page:
             assert page.status == 200
         children = tree[1:]
+        before += wait_for_line(proc, "everything is sent")  # Ctrl-C before: exit 130
         proc.send_signal(signal.SIGINT)
         assert proc.wait(30) == 0
         assert not any(c.is_running() and c.status() != psutil.STATUS_ZOMBIE for c in children)
@@ -173,10 +174,11 @@ def test_sigterm_ends_the_web_viewer_it_started(tmp_path: Path, argv: list[str])
         _, before = wait_for_serving(proc)
         children = psutil.Process(proc.pid).children(recursive=True)
         assert listening_addresses(children)
+        if argv[0] != "--demo":
+            before += wait_for_line(proc, "everything is sent")  # a capture: sent in full
         time.sleep(1.0)
         proc.send_signal(signal.SIGTERM)
-        code = proc.wait(30)
-        assert code == 0 if argv[0] != "--demo" else code in (0, 130)  # live: exits.md's
+        assert proc.wait(30) == 0  # a capture served in full, a live source stopped: clean
         psutil.wait_procs(children, timeout=10)
         assert not any(c.is_running() and c.status() != psutil.STATUS_ZOMBIE for c in children)
         assert proc.stderr is not None
@@ -210,6 +212,14 @@ def test_the_web_viewer_ends_when_eg2scope_is_killed(tmp_path: Path) -> None:
 
 def wait_for_serving(proc: subprocess.Popen[str]) -> tuple[str, str]:
     """The address plot prints, and its stderr up to it."""
+    text = wait_for_line(proc, "serving the Rerun web viewer at ")
+    found = re.search(r"serving the Rerun web viewer at (\S+) ", text)
+    assert found is not None
+    return found.group(1), text
+
+
+def wait_for_line(proc: subprocess.Popen[str], needle: str) -> str:
+    """plot's stderr up to and including the first line holding ``needle``."""
     assert proc.stderr is not None
     deadline = time.monotonic() + 60
     lines = []
@@ -218,10 +228,9 @@ def wait_for_serving(proc: subprocess.Popen[str]) -> tuple[str, str]:
         if not line:
             break
         lines.append(line)
-        found = re.search(r"serving the Rerun web viewer at (\S+) ", line)
-        if found:
-            return found.group(1), "".join(lines)
-    raise AssertionError(f"never served: {''.join(lines)}")
+        if needle in line:
+            return "".join(lines)
+    raise AssertionError(f"never said {needle!r}: {''.join(lines)}")
 
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server's file: no footer
