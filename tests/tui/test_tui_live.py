@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from conftest import demo_app, driving, until
 
+from analyzer.model import derived
 from analyzer.recording import MARKS, read_metadata
 from analyzer.sim.rig import DemoRig
 from analyzer.tui.rows import STYLE_ERROR, row_style
@@ -48,7 +49,7 @@ def test_device_panel_shows_both_grippers_with_their_states() -> None:
                     assert line.startswith(f"{row.bus:6} {row.device:<5} ")
                     # the state in words, abbreviated where the manual's do not fit: the state
                     # the panel was given (the live tracker may have moved on since)
-                    shown = row.values
+                    shown = derived(dict(row.values))
                     assert shown["state"] is not None
                     assert state_words(shown["state"], shown["state_text"], STATE_WIDTH) in line
                 await pilot.press("q")
