@@ -131,15 +131,19 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from ..fleet import layout
-    from ..fleet.inputs import expand
+    from ..fleet.inputs import check_protocol, expand, passed_over_note
     from ..fleet.progress import BatchProgress, print_summary
     from ..fleet.runner import DaskOptions, Tally, default_workers, plan, run_in_loop, run_on_dask
 
     _check(args)
     root = Path(args.output).resolve()
-    paths = expand(args.inputs, exclude=root)
+    inputs = expand(args.inputs, exclude=root)
+    paths = inputs.paths
+    if inputs.passed_over:
+        print(f"eg2scope: {passed_over_note(inputs.passed_over)}", file=sys.stderr)
     if not paths:
         raise UsageError(f"no captures in {', '.join(args.inputs)}")
+    check_protocol(paths, args.protocol)
     tally = Tally()
     dashboard = None if args.dashboard_address.lower() == "none" else args.dashboard_address
     options = DaskOptions(args.workers or default_workers(), args.scheduler, args.host, dashboard)

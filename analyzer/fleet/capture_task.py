@@ -19,9 +19,16 @@ from typing import Any, Final
 
 import pyarrow as pa
 
+from decoders.model import EG2_SERIAL
+from decoders.registry import detect_protocol, short_name
+
 from .. import __version__, native, native_parquet
 from ..commands.common import CaptureOptions, byte_protocol, open_reader, run_capture
-from ..sources.capture import CaptureReader
+from ..commands.decode import protocol_hint
+from ..pipeline import DETECT_BYTES
+from ..sources import sniff
+from ..sources.capture import CAPTURE_READERS, RAW_BYTES, CaptureReader, reader_for
+from ..sources.naming import BUS_BY_PROTOCOL
 from ..stats import CaptureStats
 from . import layout
 from .inputs import capture_suffix, content_hash
@@ -47,6 +54,14 @@ class CaptureJob:
         "auto"  # "python": the Python decoders only; else the native core where it applies
     )
 
+    @property
+    def decode_options(self) -> str:
+        """The options that change a capture's records, as the command line says them: with
+        its content hash, what identifies a capture's rows (CAN captures ignore the
+        protocol: ``-p can`` is the same as none)."""
+        protocol = byte_protocol(CaptureOptions(self.path, self.protocol))
+        return f"--protocol {'auto' if protocol is None else short_name(protocol)}"
+
 
 @dataclass
 class CaptureResult:
@@ -58,6 +73,7 @@ class CaptureResult:
     errors: int = 0
     message: str = ""
     seconds: float = 0.0
+    hint: str = ""  # decode's hint on a --protocol that finds fewer frames than detection
 
 
 class _WriteFailed(Exception):
@@ -91,17 +107,20 @@ def _decode(
         stat = path.stat()
     except OSError as exc:
         return CaptureResult(job.path, UNREADABLE, message=_reason(exc))
-    if not job.force and layout.is_done(root, digest):
+    held = None if job.force else layout.held_options(root, digest)
+    if held == job.decode_options:
         return CaptureResult(job.path, SKIPPED, digest, message="same content is in the dataset")
     layout.remove_capture(root, digest)  # what an interrupted attempt or an older run left
+    opts = _options(job)
     try:
-        reader = open_reader(_options(job))
+        reader = open_reader(opts)
     except (OSError, ValueError) as exc:
         return CaptureResult(job.path, UNREADABLE, digest, message=_reason(exc))
+    hint = protocol_hint(opts, reader)
     files = PartitionFiles(root, digest, utc_day(stat.st_mtime))
     tables = CaptureTables(files, job.path)
     try:
-        damage = _fill(job, reader, tables, progress, interrupted)
+        damage = _fill(opts, job.engine, reader, tables, progress, interrupted)
         if interrupted():
             raise KeyboardInterrupt
         stats = tables.summary.stats
@@ -109,7 +128,7 @@ def _decode(
             files.discard()
             return CaptureResult(job.path, UNREADABLE, digest, message="; ".join(damage))
         files.commit()
-        row = _captures_row(job.path, digest, stat, damage, stats, files)
+        row = _captures_row(job, digest, stat, damage, stats, files)
         _write_row(root, files.first_day or files.fallback_day, digest, row)
     except _WriteFailed as exc:
         files.discard()
@@ -117,6 +136,7 @@ def _decode(
     except BaseException:
         files.discard()
         raise
+    replaced = [] if held is None else [f"decoded again (the dataset held it decoded with {held})"]
     return CaptureResult(
         job.path,
         DAMAGED if damage else DONE,
@@ -124,12 +144,14 @@ def _decode(
         records=row["records"],
         frames=row["frames"],
         errors=row["errors"] + row["truncated"],
-        message="; ".join(damage),
+        message="; ".join(damage + replaced),
+        hint=hint,
     )
 
 
 def _fill(
-    job: CaptureJob,
+    opts: CaptureOptions,
+    engine: str,
     reader: CaptureReader,
     tables: CaptureTables,
     progress: Progress | None,
@@ -138,23 +160,25 @@ def _fill(
     """Decode the capture into ``tables``: on the native core where ``decode`` uses it (the
     Python ``reader``, opened for the same checks and messages, is then closed), else in a
     session. The damage found in the input."""
-    run = _native_run(job, reader)
+    run = None if engine == "python" else _native_run(opts, reader)
     if run is None:
-        return _in_session(job, reader, tables, progress, interrupted)
+        return _in_session(opts, reader, tables, progress, interrupted)
     reader.close()
     return _natively(run, tables, progress, interrupted)
 
 
-def _native_run(job: CaptureJob, reader: CaptureReader) -> Any:
+def _native_run(opts: CaptureOptions, reader: CaptureReader) -> Any:
     """The native core's run of a capture, records and state samples as columns, or None:
-    the Python engine was asked for, or the core does not read this capture (as ``decode``
-    decides, analyzer/native.py)."""
-    if job.engine == "python" or native.ineligible(reader, "parquet", None, None):
+    the core does not read this capture (as ``decode`` decides, analyzer/native.py)."""
+    if native.ineligible(reader, "parquet", None, None):
         return None
-    opts = _options(job)
     try:
         return native_parquet.open_run(
-            native._native, opts.path, states=STATE_COLUMNS, protocol=byte_protocol(opts)
+            native._native,
+            opts.path,
+            states=STATE_COLUMNS,
+            protocol=byte_protocol(opts),
+            bus=opts.bus,
         )
     except (native._native.Unsupported, OSError):  # type: ignore[union-attr]
         return None  # the core's word: the session decodes it, or says why it cannot
@@ -183,7 +207,7 @@ def _natively(
 
 
 def _in_session(
-    job: CaptureJob,
+    opts: CaptureOptions,
     reader: CaptureReader,
     tables: CaptureTables,
     progress: Progress | None,
@@ -193,7 +217,7 @@ def _in_session(
     and Tracker, as any session on CAN input), its listeners filling the tables."""
     output = SessionTables(tables)
     checkpoint = Checkpoint(lambda: reader.position, progress or _ignore, interrupted)
-    session, reader = run_capture(_options(job), [output, checkpoint], reader)
+    session, reader = run_capture(opts, [output, checkpoint], reader)
     if session.counts.interrupted:
         raise KeyboardInterrupt
     failed = [exc for listener, exc in session.detached if listener is output]
@@ -208,7 +232,26 @@ def _ignore(position: int, records: int) -> None:
 
 def _options(job: CaptureJob) -> CaptureOptions:
     engine = "python" if job.engine == "python" else "auto"
-    return CaptureOptions(path=job.path, protocol=job.protocol, progress=False, engine=engine)
+    bus = dump_bus(job.path, byte_protocol(CaptureOptions(job.path, job.protocol)))
+    return CaptureOptions(job.path, job.protocol, bus, progress=False, engine=engine)
+
+
+#: the readers of raw serial dumps (a file no format claims), plain and gzipped
+_DUMP_READERS: Final = frozenset({RAW_BYTES, CAPTURE_READERS[".gz"]})
+
+
+def dump_bus(path: str, protocol: str | None) -> str | None:
+    """A raw dump's bus, named by its protocol as a live serial line is (``rs232`` for the
+    regular serial protocol, ``rs485`` for Modbus RTU): the one given, else the one the
+    decoding detects in its first bytes. None for any other capture (its buses are its own)."""
+    try:
+        if reader_for(path) not in _DUMP_READERS:
+            return None
+    except ValueError:
+        return None  # the reader says why when it is opened
+    if protocol is None:
+        protocol = detect_protocol(sniff.head(path)[:DETECT_BYTES]) or EG2_SERIAL
+    return BUS_BY_PROTOCOL[protocol]
 
 
 def _reason(exc: BaseException) -> str:
@@ -216,7 +259,7 @@ def _reason(exc: BaseException) -> str:
 
 
 def _captures_row(
-    path: str,
+    job: CaptureJob,
     digest: str,
     stat: os.stat_result,
     damage: list[str],
@@ -227,11 +270,12 @@ def _captures_row(
     totals = stats.totals()
     latency = totals.latency.summary()
     return {
-        "capture_path": path,
+        "capture_path": job.path,
         "capture_hash": digest,
+        "decode_options": job.decode_options,
         "size": stat.st_size,
         "mtime": stat.st_mtime_ns // 1000,  # microseconds: what every reader takes
-        "format": capture_suffix(Path(path)) or "raw",
+        "format": capture_suffix(Path(job.path)) or "raw",
         "protocols": sorted(data["protocols"]),
         "buses": files.buses,
         "devices": [{k: d[k] for k in ("bus", "protocol", "device")} for d in data["devices"]],

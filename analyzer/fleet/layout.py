@@ -24,10 +24,13 @@ from pathlib import Path
 from typing import Final
 from urllib.parse import quote
 
+from ..outfile import OutputError
+
 RECORDS: Final = "records"
 STATES: Final = "states"
 CAPTURES: Final = "captures"
 TABLES: Final = (RECORDS, STATES, CAPTURES)
+OPTIONS: Final = "decode_options"  # in a captures/ row: with the content hash, its key
 LOCK_NAME: Final = ".eg2scope-batch.lock"
 _TEMP_MARK: Final = ".tmp-"
 
@@ -53,9 +56,19 @@ def done_hashes(root: Path) -> set[str]:
     return {p.stem for p in (root / CAPTURES).glob("day=*/*.parquet")}
 
 
-def is_done(root: Path, content_hash: str) -> bool:
-    """Whether the dataset holds this capture (its ``captures/`` row exists)."""
-    return any((root / CAPTURES).glob(f"day=*/{content_hash}.parquet"))
+def held_options(root: Path, content_hash: str) -> str | None:
+    """The decode options of the capture the dataset holds with this content (its
+    ``captures/`` row's ``decode_options``; "" for a row written before they were kept), or
+    None when it holds none."""
+    rows = sorted((root / CAPTURES).glob(f"day=*/{content_hash}.parquet"))
+    if not rows:
+        return None
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(rows[0])
+    if OPTIONS not in table.column_names:
+        return ""
+    return str(table.column(OPTIONS)[0].as_py() or "")
 
 
 def capture_files(root: Path, content_hash: str) -> list[Path]:
@@ -87,8 +100,14 @@ class DatasetLocked(RuntimeError):
 def run_lock(root: Path) -> Iterator[None]:
     """One batch run per dataset at a time (an advisory lock on a file in its folder); stale
     temporary files are removed once it is held, and again at the end."""
-    root.mkdir(parents=True, exist_ok=True)
-    with open(root / LOCK_NAME, "a+b") as lock:
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        lock = open(root / LOCK_NAME, "a+b")  # noqa: SIM115 (closed below)
+    except OSError as exc:
+        raise OutputError(
+            f"cannot write the dataset folder {root}: {exc.strerror or exc}"
+        ) from None
+    with lock:
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

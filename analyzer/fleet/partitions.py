@@ -24,7 +24,7 @@ class PartitionFiles:
     def __init__(self, root: Path, content_hash: str, fallback_day: str) -> None:
         self.root = root
         self.hash = content_hash
-        self.fallback_day = fallback_day  # for rows without a time (raw dumps have no clock)
+        self.fallback_day = fallback_day  # rows without a calendar time: tables.days
         self.writers: dict[tuple[str, str, str], tuple[RowGroupWriter, Path]] = {}
         self.first_day: str | None = None
 

@@ -79,13 +79,19 @@ class BatchProgress(Running):
             self.finished.add(result.path)
             self.running.pop(result.path, None)
             self.done_bytes += self.sizes.get(result.path, 0)
+            if result.hint:  # as decode says it
+                self._say(f"eg2scope: {result.path}: {result.hint}", "yellow")
             if result.status in _STYLE:
-                self.console.print(
+                self._say(
                     f"eg2scope: {result.path}: {result.status}: {result.message}",
-                    style=_STYLE[result.status],
-                    soft_wrap=True,
+                    _STYLE[result.status],
                 )
+            elif result.status == DONE and result.message:
+                self._say(f"eg2scope: {result.path}: {result.message}")
             self._update()
+
+    def _say(self, line: str, style: str | None = None) -> None:
+        self.console.print(line, style=style, soft_wrap=True, markup=False)
 
     def _update(self) -> None:
         tally = self.tally

@@ -30,7 +30,7 @@ from .capture_task import (
     decode_capture,
 )
 from .listeners import Throttled
-from .tables import HASH, PATH
+from .tables import CAPTURES_SCHEMA, HASH, PATH
 
 Report = Callable[[CaptureResult], None]
 
@@ -52,35 +52,38 @@ def plan(
     paths: Iterable[Path], root: Path, protocol: str | None, force: bool, engine: str = "auto"
 ) -> tuple[list[CaptureJob], list[CaptureResult]]:
     """The jobs to run, and the captures skipped without reading them: a path whose size and
-    modification time match its row in ``captures/`` has the same content (as make and rsync
-    assume); anything else is hashed by its task."""
+    modification time match its row in ``captures/``, decoded with the same options, has the
+    same rows (as make and rsync assume); anything else is hashed by its task."""
     known = {} if force else _known(root)
     jobs, skipped = [], []
     for path in paths:
         stat = path.stat()
-        digest = known.get((str(path), stat.st_size, stat.st_mtime_ns // 1000))
+        job = CaptureJob(str(path), str(root), protocol, force, engine)
+        key = (str(path), stat.st_size, stat.st_mtime_ns // 1000, job.decode_options)
+        digest = known.get(key)
         if digest is not None:
             skipped.append(CaptureResult(str(path), SKIPPED, digest, message="unchanged"))
         else:
-            jobs.append(CaptureJob(str(path), str(root), protocol, force, engine))
+            jobs.append(job)
     return jobs, skipped
 
 
-def _known(root: Path) -> dict[tuple[str, int, int], str]:
-    """(path, size, mtime) -> content hash, of the captures the dataset holds."""
+def _known(root: Path) -> dict[tuple[str, int, int, str], str]:
+    """(path, size, mtime, decode options) -> content hash, of the captures the dataset
+    holds."""
     files = sorted((root / layout.CAPTURES).glob("day=*/*.parquet"))
     if not files:
         return {}
     import pyarrow.dataset as ds  # 0.1 s to import: only for a dataset that holds captures
 
-    columns = [PATH, HASH, "size", "mtime"]
-    table = ds.dataset([str(f) for f in files], format="parquet").to_table(columns=columns)
+    columns = [PATH, HASH, "size", "mtime", layout.OPTIONS]
+    # the schema of today's rows: one written before the options were kept reads as null
+    dataset = ds.dataset([str(f) for f in files], schema=CAPTURES_SCHEMA, format="parquet")
+    table = dataset.to_table(columns=columns)
     table = table.set_column(3, "mtime", table.column("mtime").cast("int64"))
     rows = table.to_pydict()
-    return {
-        (p, s, m): h
-        for p, h, s, m in zip(rows[PATH], rows[HASH], rows["size"], rows["mtime"], strict=True)
-    }
+    keys = zip(rows[PATH], rows["size"], rows["mtime"], rows[layout.OPTIONS], strict=True)
+    return dict(zip(keys, rows[HASH], strict=True))
 
 
 #: how far a capture has got, for the progress bar: (path, bytes of it read, records)

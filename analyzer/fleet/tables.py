@@ -23,6 +23,7 @@ from ..batches import SampleBatch
 from ..model import StateSample
 from ..parquet_schema import SCHEMA as RECORD_SCHEMA
 from ..parquet_schema import described_field, millimetres
+from ..sources.candump import RELATIVE_LIMIT
 from ..tracker import VALUE_KEYS
 
 BUS: Final = "bus"
@@ -116,6 +117,12 @@ CAPTURES_SCHEMA: Final = pa.schema(
     [
         described_field(PATH, STR, description="the capture file, as given to eg2scope batch"),
         described_field(HASH, STR, description="sha256 of the capture file's bytes"),
+        described_field(
+            "decode_options",
+            STR,
+            description="the options it was decoded with that change its records "
+            "('--protocol auto', '--protocol modbus'); with capture_hash, its key",
+        ),
         described_field("size", INT, "bytes"),
         described_field(
             "mtime", pa.timestamp("us", "UTC"), description="the file's modification time"
@@ -150,10 +157,11 @@ def utc_day(t: float) -> str:
     return dt.datetime.fromtimestamp(t, dt.UTC).strftime("%Y-%m-%d")
 
 
-# the times a day can be told of (0001-01-01 to 9999-12-31 UTC); others are no clock's.
-# Scalars for compute functions are made once, typed: pyarrow infers the type of a Python
-# value anew at every call (and tries to import dateutil each time)
-_FIRST_S: Final = pa.scalar(-62_135_596_800.0, FLOAT)
+# the times a day can be told of: from 1991-01-01 (an earlier time is a capture's own clock,
+# relative to its start, as candump's reader tells -tz/-td stamps from Unix time) to
+# 9999-12-31 UTC. Scalars for compute functions are made once, typed: pyarrow infers the type
+# of a Python value anew at every call (and tries to import dateutil each time)
+_FIRST_S: Final = pa.scalar(RELATIVE_LIMIT, FLOAT)
 _END_S: Final = pa.scalar(253_402_300_800.0, FLOAT)
 _MICRO: Final = pa.scalar(1e6, FLOAT)
 _NO_TIME: Final = pa.scalar(None, FLOAT)
@@ -161,16 +169,20 @@ _NO_TIME: Final = pa.scalar(None, FLOAT)
 
 def days(t: pa.ChunkedArray | pa.Array, fallback: str) -> str | pa.Array | pa.ChunkedArray:
     """Each row's UTC day from its time in seconds (rounded to the microsecond, as
-    ``datetime.fromtimestamp`` does); ``fallback`` where there is no time, or one no calendar
-    holds (NaN, infinite, beyond year 9999). One string when every row has the same day (the
-    usual batch: its first and last times fall on one day)."""
+    ``datetime.fromtimestamp`` does); ``fallback`` where there is no calendar time: none
+    (raw dumps), one relative to the capture's start (before 1991), or one no calendar holds
+    (NaN, infinite, beyond year 9999). One string when every row has the same day (the usual
+    batch: its first and last times fall on one day)."""
     if t.null_count == len(t):
         return fallback
     if not t.null_count and math.isfinite(pc.sum(t).as_py()):  # no NaN nor infinity
         first, last = pc.min_max(t).values()
-        ends = _days(pa.array([first.as_py(), last.as_py()], FLOAT), fallback).to_pylist()
-        if ends[0] == ends[1] != fallback:
-            return str(ends[0])
+        if first.as_py() < _FIRST_S.as_py() and last.as_py() < _FIRST_S.as_py():
+            return fallback  # the capture's own clock throughout
+        if first.as_py() >= _FIRST_S.as_py() and last.as_py() < _END_S.as_py():
+            ends = _days(pa.array([first.as_py(), last.as_py()], FLOAT), fallback).to_pylist()
+            if ends[0] == ends[1]:
+                return str(ends[0])
     return _days(t, fallback)
 
 

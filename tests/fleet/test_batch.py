@@ -176,10 +176,10 @@ def test_unreadable_is_reported_and_the_rest_go_on(
 
 def test_a_folder_scan_takes_captures_only(fleet: dict[str, Path]) -> None:
     root = fleet["candump"].parents[2]
-    found = expand([str(root)])
+    found = expand([str(root)]).paths
     assert {p.name for p in found} == {p.name for p in fleet.values()}
     assert not any(p.name == "README.txt" for p in found)
-    pattern = expand([f"{root}/site-a/**/*.log*"])
+    pattern = expand([f"{root}/site-a/**/*.log*"]).paths
     assert {p.name for p in pattern} == {"can_day1.log", "can_day2.log.gz"}
 
 
