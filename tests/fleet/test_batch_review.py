@@ -188,10 +188,7 @@ def test_captures_without_calendar_time_go_under_their_files_modification_day(
     out = tmp_path / "d"
     code, _, err = batch(capsys, out, engine, str(folder))
     assert code == 0, err
-    days = {
-        Path(str(r["capture_path"])).name: str(r["day"])
-        for r in captures_rows(out)
-    }
+    days = {Path(str(r["capture_path"])).name: str(r["day"]) for r in captures_rows(out)}
     absolute_day = dt.datetime.fromtimestamp(
         float(CAN_LOG.read_text().split(")", 1)[0].lstrip("(")), dt.UTC
     ).date()
