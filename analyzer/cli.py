@@ -6,18 +6,12 @@ import argparse
 import importlib
 import os
 import sys
-import textwrap
 from collections.abc import Sequence
 
 from . import __version__, native
 from .commands import SUBCOMMANDS
-from .errors import (
-    EXIT_ERROR,
-    EXIT_USAGE,
-    HELP_EXIT_STATUS,
-    UsageError,
-    stop_status,
-)
+from .commands.helptext import EXIT_STATUS, HelpFormatter, epilog
+from .errors import EXIT_ERROR, EXIT_USAGE, UsageError, stop_status
 from .session import signals_as_interrupt
 
 
@@ -29,11 +23,8 @@ def build_parser() -> argparse.ArgumentParser:
             "gripper: the regular serial protocol (RS232), Modbus RTU (RS485) and the CAN "
             "register protocol. Decodes captures and live buses into words."
         ),
-        epilog=(
-            "Run 'eg2scope COMMAND --help' for the options of one command.\n\n"
-            + textwrap.fill(HELP_EXIT_STATUS, width=88)
-        ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=epilog("Run 'eg2scope COMMAND --help' for the options of one command.", EXIT_STATUS),
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "--version", action="version", version=f"eg2scope {__version__} ({native.status()})"

@@ -23,14 +23,6 @@ EXIT_USAGE: Final = 2
 EXIT_DAMAGED: Final = 3
 EXIT_INTERRUPTED: Final = 130
 
-HELP_EXIT_STATUS: Final = (
-    "exit status: 0 done (a live capture stopped with Ctrl-C, SIGTERM or SIGHUP is done: "
-    "its recording is finished); 1 error (a file that cannot be read or written, a live "
-    "source that never opened, a device that failed); 2 usage error; 3 decoded as far as "
-    "possible, but the input is damaged; 130 a file job (decode, stats, batch, plot or tui "
-    "of a capture) interrupted before the end of its input"
-)
-
 
 class UsageError(ValueError):
     """The command line asks for something that cannot be done (exit 2)."""

@@ -4,7 +4,6 @@ this machine's cores or a Dask cluster (analyzer/fleet)."""
 from __future__ import annotations
 
 import argparse
-import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +11,7 @@ from .. import native
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..interrupts import noted_interrupts
 from .common import add_protocol_argument, positive_int
+from .helptext import BATCH_EXIT_STATUS, HelpFormatter
 
 INSTALL_HINT = "pip install 'eg2scope[fleet]'"
 
@@ -20,7 +20,7 @@ def add_subparser(sub: Any) -> None:
     parser = sub.add_parser(
         "batch",
         help="decode many captures into one Parquet dataset (Dask for many cores or machines)",
-        description=textwrap.fill(
+        description=(
             "Decode a fleet's captures (eg2scope .mcap recordings, candump logs, python-can "
             "logs, raw serial dumps) into one Parquet dataset that pandas, polars and DuckDB "
             "read directly: records/ (every record, the columns of 'decode --format parquet' "
@@ -28,8 +28,7 @@ def add_subparser(sub: Any) -> None:
             "(one row per capture: counts, latency, damage), partitioned by day and bus. A "
             "capture the dataset holds already (same sha256) is skipped, so a run that was "
             "interrupted finishes the rest when run again; --force decodes everything again. "
-            "See docs/fleet.md.",
-            width=88,
+            "See docs/fleet.md."
         ),
         epilog=(
             "examples:\n"
@@ -39,15 +38,9 @@ def add_subparser(sub: Any) -> None:
             "Dask is an optional extra: "
             + INSTALL_HINT
             + " (--workers 1 needs no Dask).\n\n"
-            + textwrap.fill(
-                "exit status: 0 every capture decoded; 1 a capture could not be read or "
-                "written (the others are in the dataset); 2 usage error; 3 some capture is "
-                "damaged (decoded as far as possible, marked in captures/); 130 interrupted "
-                "by Ctrl-C, SIGTERM or SIGHUP (run again to finish)",
-                width=88,
-            )
+            + BATCH_EXIT_STATUS
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "inputs",

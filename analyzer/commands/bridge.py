@@ -7,6 +7,7 @@ from typing import Any
 
 from ..sources.naming import UNNAMED
 from ..sources.serial_tap import SerialBridge
+from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import (
     add_line_arguments,
     add_naming_arguments,
@@ -15,7 +16,7 @@ from .livesource import (
     named_serial_tap,
     serial_bus_name,
 )
-from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
+from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -28,14 +29,23 @@ def add_subparser(sub: Any) -> None:
             "as it arrives, and decoded with its direction known. Unlike the other taps this "
             "one is in the line (not passive). Ctrl-C or SIGTERM ends it."
         ),
-        epilog=LIVE_EXIT_STATUS,
+        epilog=epilog(
+            "example:\n  eg2scope bridge /dev/ttyUSB0 /dev/ttyUSB1 -o run.mcap", LIVE_EXIT_STATUS
+        ),
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("host_port", metavar="HOST_PORT", help="port the host controller is on")
     parser.add_argument("device_port", metavar="DEVICE_PORT", help="port the gripper is on")
     parser.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    add_naming_arguments(parser)
+    add_naming_arguments(parser, can=False)
     add_wait_argument(parser)
-    parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
+    parser.add_argument(
+        "--format",
+        "-f",
+        choices=("text", "jsonl"),
+        default="text",
+        help="stdout format: text, for people (default), or jsonl, one JSON record per line",
+    )
     add_line_arguments(parser)
     add_session_arguments(parser, record_required=False)
     parser.set_defaults(func=run)

@@ -19,6 +19,7 @@ from ..session import Session, SessionCounts, SessionOptions
 from ..sources.capture import CaptureReader, open_capture
 from ..sources.pacing import parse_speed
 from ..sources.source import CaptureSource
+from .helptext import CAPTURE_FILE
 
 
 def _whole_number(text: str, lowest: int) -> int:
@@ -69,7 +70,7 @@ def protocol_type(text: str) -> str | None:
     try:
         return resolve_protocol(text)
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+        raise argparse.ArgumentTypeError(f"{exc}, or auto (detected)") from None
 
 
 def speed_type(text: str) -> float | None:
@@ -96,10 +97,7 @@ def add_protocol_argument(parser: argparse.ArgumentParser) -> None:
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "file",
-        help="capture to read, its format told by its content whatever its name: a candump "
-        "log in any layout, a PCAN trace (.trc, 1.0-2.1), Vector .asc/.blf, python-can .csv, "
-        "ASAM .mf4, an eg2scope .mcap recording (text logs also .gz), or any other file as raw "
-        "serial bytes (.gz too)",
+        help=CAPTURE_FILE,
     )
     add_protocol_argument(parser)
     parser.add_argument(

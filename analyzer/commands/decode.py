@@ -7,7 +7,6 @@ import dataclasses
 import os
 import stat
 import sys
-import textwrap
 from typing import IO, Any
 
 from decoders.registry import PROTOCOL_WORDS, short_name, valid_frames
@@ -29,16 +28,10 @@ from .common import (
     report_empty,
     run_capture,
 )
+from .helptext import FILE_EXIT_STATUS, HelpFormatter, epilog
 
 FORMATS = ("text", "jsonl", "csv", "parquet")
 BINARY = ("jsonl", "parquet")
-EXIT_CODES = textwrap.fill(
-    "exit status: 0 decoded (an empty capture is said so on stderr); 1 error (a file that "
-    "cannot be read or written); 2 usage error; 3 decoded as far as possible, but the input "
-    "is damaged (see the messages on stderr); 130 interrupted (Ctrl-C, SIGTERM) before the "
-    "end of the input",
-    width=88,
-)
 
 
 def add_subparser(sub: Any) -> None:
@@ -51,13 +44,14 @@ def add_subparser(sub: Any) -> None:
             "byte appears in a record: bytes that belong to no frame come out as 'garbage', a "
             "frame cut off by the end of the file as 'truncated'."
         ),
-        epilog=(
+        epilog=epilog(
             "examples:\n"
             "  eg2scope decode captures/can_pick_place.log\n"
             "  eg2scope decode dump.bin --protocol modbus --format jsonl > out.jsonl\n"
-            "  eg2scope decode capture.blf --device 2 --errors-only\n\n" + EXIT_CODES
+            "  eg2scope decode capture.blf --device 2 --errors-only",
+            FILE_EXIT_STATUS,
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     add_input_arguments(parser)
     parser.add_argument(

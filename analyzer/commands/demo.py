@@ -11,7 +11,8 @@ from ..listener import Listener
 from ..session import Session
 from ..sim.rig import BUSES, DemoRig
 from .common import probability
-from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
+from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
+from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -25,11 +26,17 @@ def add_subparser(sub: Any) -> None:
             "taps, decoded live. A little line noise is injected so checksum errors and garbage "
             "show up. Ctrl-C or SIGTERM ends it."
         ),
-        epilog="example: eg2scope demo --duration 10 -o demo.mcap\n\n" + LIVE_EXIT_STATUS,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=epilog("example:\n  eg2scope demo --duration 10 -o demo.mcap", LIVE_EXIT_STATUS),
+        formatter_class=HelpFormatter,
     )
     add_demo_arguments(parser)
-    parser.add_argument("--format", "-f", choices=("text", "jsonl"), default="text")
+    parser.add_argument(
+        "--format",
+        "-f",
+        choices=("text", "jsonl"),
+        default="text",
+        help="stdout format: text, for people (default), or jsonl, one JSON record per line",
+    )
     add_session_arguments(parser, record_required=False)
     parser.set_defaults(func=run, protocol="auto")
 

@@ -6,8 +6,9 @@ import argparse
 from typing import Any
 
 from ..rerun_target import add_rerun_argument
+from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, open_taps
-from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
+from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -21,16 +22,15 @@ def add_subparser(sub: Any) -> None:
             "fails at once (--wait waits for it); one that goes away is reported and reopened "
             "when it comes back, and the gap is marked. Ctrl-C or SIGTERM ends it."
         ),
-        epilog=(
+        epilog=epilog(
             "examples:\n"
             "  eg2scope live -i socketcan -c can0 -b 500000\n"
             "  eg2scope live --serial /dev/ttyUSB0 --protocol modbus\n"
-            "  eg2scope live --serial /dev/ttyUSB0 --serial /dev/ttyUSB1   # one adapter per "
-            "RS232 wire\n"
-            "  eg2scope live -i pcan -c PCAN_USBBUS1 -o run.mcap            # and record\n\n"
-            + LIVE_EXIT_STATUS
+            "  eg2scope live -s /dev/ttyUSB0 -s /dev/ttyUSB1     # one adapter per RS232 wire\n"
+            "  eg2scope live -i pcan -c PCAN_USBBUS1 -o run.mcap # and record",
+            LIVE_EXIT_STATUS,
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     add_source_arguments(parser)
     add_rerun_argument(parser)

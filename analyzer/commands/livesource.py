@@ -69,7 +69,7 @@ def serial_protocol_type(text: str) -> str | None:
     try:
         protocol = resolve_protocol(text)
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+        raise argparse.ArgumentTypeError(f"{exc}, or auto (detected)") from None
     if protocol == EG2_CAN:
         raise argparse.ArgumentTypeError(
             "--protocol is a serial line's: serial, modbus or auto (a CAN source is always CAN)"
@@ -77,8 +77,12 @@ def serial_protocol_type(text: str) -> str | None:
     return protocol
 
 
-def add_naming_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--protocol`` and ``--bus`` of a serial source."""
+def add_naming_arguments(parser: argparse.ArgumentParser, can: bool = True) -> None:
+    """``--protocol`` and ``--bus`` of a serial source (``can``: of a CAN one too)."""
+    serial = (
+        "by protocol: rs232 for the regular serial protocol, rs485 for Modbus RTU, named when "
+        "it is detected"
+    )
     parser.add_argument(
         "--protocol",
         "-p",
@@ -91,8 +95,9 @@ def add_naming_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bus",
         metavar="NAME",
-        help="bus name in records (default: the CAN channel; for serial, by protocol: rs232 "
-        "for the regular serial protocol, rs485 for Modbus RTU, named when it is detected)",
+        help=f"bus name in records (default: the CAN channel; for serial, {serial})"
+        if can
+        else f"bus name in records (default: {serial})",
     )
 
 

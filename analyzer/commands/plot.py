@@ -27,6 +27,7 @@ from .common import (
     speed_type,
 )
 from .demo import add_demo_arguments
+from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
 from .livesource import CAN_KEYS, add_source_arguments, open_taps
 from .session import add_session_arguments, run_session
 
@@ -46,21 +47,20 @@ def add_subparser(sub: Any) -> None:
             "layout shows a plot only for what the capture carries, every plot of a capture "
             "over its whole span on one linked time axis (see docs/rerun.md)."
         ),
-        epilog=(
+        epilog=epilog(
             "examples:\n"
             "  eg2scope plot captures/can_pick_place.log\n"
             "  eg2scope plot run.mcap --save run.rrd        # then: rerun run.rrd\n"
             "  eg2scope plot --demo                         # simulated grippers, live\n"
-            "  eg2scope plot -i socketcan -c can0 --serve-web"
+            "  eg2scope plot -i socketcan -c can0 --serve-web",
+            EXIT_STATUS,
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "file",
         nargs="?",
-        help="capture to plot: candump -L .log (also .log.gz), python-can "
-        ".asc/.blf/.trc/.csv/.mf4, an eg2scope .mcap recording, or any other file as raw "
-        "serial bytes (or give a live source or --demo instead)",
+        help=f"{CAPTURE_FILE} (or give a live source or --demo instead)",
     )
     target = parser.add_argument_group(
         "where the plot goes (default: spawn a viewer, or "

@@ -7,8 +7,9 @@ from typing import Any
 
 from ..rerun_target import add_rerun_argument
 from .demo import add_demo_arguments, run_demo
+from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, open_taps
-from .session import LIVE_EXIT_STATUS, add_session_arguments, run_session
+from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -22,13 +23,14 @@ def add_subparser(sub: Any) -> None:
             "second, so a recorder that is killed loses at most the last second; Ctrl-C or "
             "SIGTERM finishes the file and ends cleanly. Replay with 'eg2scope decode run.mcap'."
         ),
-        epilog=(
+        epilog=epilog(
             "examples:\n"
             "  eg2scope record -i socketcan -c can0 -o run.mcap\n"
             "  eg2scope record --serial /dev/ttyUSB0 -o run.mcap --show\n"
-            "  eg2scope record --demo -o demo.mcap --duration 10\n\n" + LIVE_EXIT_STATUS
+            "  eg2scope record --demo -o demo.mcap --duration 10",
+            LIVE_EXIT_STATUS,
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     add_source_arguments(parser)
     parser.add_argument(

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import textwrap
 import time
 from collections.abc import Callable, Sequence
 from typing import IO, Any
@@ -24,13 +23,6 @@ from ..sources.live import Tap
 from ..sources.naming import BUS_BY_PROTOCOL
 from ..sources.source import LiveSource
 from .common import exit_code, positive_float, positive_int
-
-LIVE_EXIT_STATUS = textwrap.fill(
-    "exit status: 0 stopped (Ctrl-C, SIGTERM or SIGHUP, or the end of --duration: the "
-    "recording is finished); 1 error (a source that does not open, a device that failed, an "
-    "output that cannot be written); 2 usage error",
-    width=88,
-)
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:

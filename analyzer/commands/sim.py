@@ -8,7 +8,6 @@ import os
 import signal
 import sys
 import tempfile
-import textwrap
 import threading
 import time
 from typing import Any
@@ -18,10 +17,10 @@ from ..sim.endpoints import CanGripperServer, ModbusGripperServer, SerialGripper
 from ..sim.gripper import GripperModel
 from ..sim.host import HostQuirks, run_host_cycle
 from ..sim.ptybus import PtyBus
+from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 
 DESCRIPTION = "\n\n".join(
-    textwrap.fill(paragraph, 79) if not paragraph.startswith("  ") else paragraph
-    for paragraph in (
+    (
         "Start one or more simulated EG2-4XX grippers that answer as the protocol reference "
         "describes (latency, save pause, run states, faults, Modbus exceptions, short register "
         "numbers), and print where to connect.",
@@ -52,14 +51,15 @@ def add_subparser(sub: Any) -> None:
         "sim",
         help="run simulated grippers on a virtual serial line or CAN bus",
         description=DESCRIPTION,
-        epilog=(
+        epilog=epilog(
             "examples:\n"
             "  eg2scope sim serial                      # one gripper, ID 1\n"
             "  eg2scope sim modbus --id 1 --id 2 --noise 0.01\n"
             "  eg2scope sim can -i socketcan -c vcan0 --host-cycle\n"
-            "  eg2scope sim serial --host-cycle         # traffic for a sniffer on the tap"
+            "  eg2scope sim serial --host-cycle         # traffic for a sniffer on the tap",
+            LIVE_EXIT_STATUS,
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "protocol", choices=("serial", "modbus", "can"), help="which gripper model to simulate"

@@ -15,7 +15,7 @@ from decoders.flags import DESCRIPTIONS
 from ..sinks.stats import StatsListener
 from ..stats import COUNT_NAMES
 from .common import CaptureOptions, add_input_arguments, finish_capture, run_capture
-from .decode import EXIT_CODES
+from .helptext import FILE_EXIT_STATUS, HelpFormatter
 
 
 def add_subparser(sub: Any) -> None:
@@ -27,7 +27,8 @@ def add_subparser(sub: Any) -> None:
             "errors (checksum, CRC, garbage, truncation), response latency p50/p95/max, the "
             "warnings raised by the manual's rules, and notable patterns such as ID scans."
         ),
-        epilog=EXIT_CODES,
+        epilog=FILE_EXIT_STATUS,
+        formatter_class=HelpFormatter,
     )
     add_input_arguments(parser)
     parser.add_argument(

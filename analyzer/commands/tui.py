@@ -24,6 +24,7 @@ from .common import (
     speed_type,
 )
 from .demo import add_demo_arguments
+from .helptext import EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, open_taps
 from .session import (
     add_session_arguments,
@@ -53,15 +54,16 @@ def add_subparser(sub: Any) -> None:
             "every live source 'live' takes, the simulated buses (--demo), or a capture file "
             "'decode' reads, replayed (--speed)."
         ),
-        epilog=(
+        epilog=epilog(
             "examples:\n"
             "  eg2scope tui --demo\n"
             "  eg2scope tui -i socketcan -c can0 -b 500000\n"
             "  eg2scope tui --serial /dev/ttyUSB0 -o run.mcap   # watch and record\n"
             "  eg2scope tui run.mcap --speed 10                 # replay a capture\n\n"
-            "keys:\n" + help_text()
+            "keys:\n" + help_text(),
+            EXIT_STATUS,
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "file", nargs="?", help="a capture to replay (anything 'eg2scope decode' reads)"
