@@ -38,7 +38,7 @@ def test_unanswered_requests_and_faults_by_gripper_and_command(
     fleet_folder: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     rows = run(QUERIES[0], fleet_folder, monkeypatch)
-    assert ("serial", 2, "unanswered", "CMD_OPENLEN_SET", 1) in rows
+    assert ("rs485", 2, "unanswered", "CMD_OPENLEN_SET", 1) in rows  # the Modbus dump's bus
     assert all(
         problem == "unanswered" or problem.startswith("fault: ") for _, _, problem, *_ in rows
     )

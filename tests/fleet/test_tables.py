@@ -1,7 +1,8 @@
 """The fleet tables' partition day: the UTC day of a record's time in seconds, as Python's
 ``datetime.fromtimestamp`` tells it, for times with fractions of a microsecond (what
 ``record --demo`` and python-can's logs hold), and the capture's day where no calendar holds
-the time."""
+the time: none, one before 1991 (a capture's own clock, counting from its start, as candump's
+reader tells relative stamps), or one no calendar holds."""
 
 from __future__ import annotations
 
@@ -13,10 +14,11 @@ import pyarrow as pa
 import pytest
 
 from analyzer.fleet.tables import days
+from analyzer.sources.candump import RELATIVE_LIMIT
 
 
 def python_day(t: float | None, fallback: str) -> str:
-    if t is None or not math.isfinite(t):
+    if t is None or not math.isfinite(t) or t < RELATIVE_LIMIT:
         return fallback
     try:
         return dt.datetime.fromtimestamp(t, dt.UTC).strftime("%Y-%m-%d")
@@ -50,4 +52,12 @@ def test_no_calendar_holds_it_the_capture_s_day(odd: float | None) -> None:
 
 
 def test_the_last_day_a_calendar_holds() -> None:
-    assert rows([253_402_300_799.0, -62_135_596_800.0]) == ["9999-12-31", "0001-01-01"]
+    assert rows([253_402_300_799.0, RELATIVE_LIMIT]) == ["9999-12-31", "1991-01-01"]
+
+
+@pytest.mark.parametrize(
+    "relative", [0.0, 0.5, 86_400.25, 5_000_000.0, RELATIVE_LIMIT - 1e-6, -3.0]
+)
+def test_a_time_counted_from_the_capture_s_start_takes_the_capture_s_day(relative: float) -> None:
+    assert rows([relative]) == ["fallback"]  # never 1970-01-01
+    assert rows([relative, 1_763_700_000.5]) == ["fallback", "2025-11-21"]
