@@ -26,8 +26,9 @@ def add_subparser(sub: Any) -> None:
             "read directly: records/ (every record, the columns of 'decode --format parquet' "
             "plus capture_path and capture_hash), states/ (every state sample) and captures/ "
             "(one row per capture: counts, latency, damage), partitioned by day and bus. A "
-            "capture the dataset holds already (same sha256) is skipped, so a run that was "
-            "interrupted finishes the rest when run again; --force decodes everything again. "
+            "capture the dataset holds already (same sha256, decoded with the same --protocol) "
+            "is skipped, so a run that was interrupted finishes the rest when run again; "
+            "--force decodes everything again. "
             "See docs/fleet.md."
         ),
         epilog=(
@@ -46,9 +47,10 @@ def add_subparser(sub: Any) -> None:
         "inputs",
         nargs="+",
         metavar="CAPTURES",
-        help="capture files, folders (searched recursively for capture suffixes: .mcap, .log, "
-        ".log.gz, .asc, .blf, .trc, .csv, .mf4, .bin, .raw, .dump) or glob patterns in quotes "
-        "('site-a/**/*.mcap')",
+        help="capture files, folders (searched recursively for captures, by suffix: .mcap, "
+        ".log, .log.gz, .asc, .blf, .trc, .csv, .mf4, .bin, .raw, .dump, or by content: a "
+        "candump log saved as .txt; the files passed over are counted) or glob patterns in "
+        "quotes ('site-a/**/*.mcap')",
     )
     parser.add_argument("--output", "-o", required=True, metavar="DIR", help="the dataset folder")
     parser.add_argument(
