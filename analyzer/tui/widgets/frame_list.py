@@ -183,6 +183,8 @@ class FrameList(ScrollView, can_focus=True):
             # layout, and Textual would not scroll it (a small capture decoded in one update
             # stayed on its first page while "following")
             self.scroll_to(y=target, animate=False, immediate=True, force=True)
+            if not self.show_vertical_scrollbar:  # ... nor move the bar it is about to show
+                self.vertical_scrollbar.position = self.scroll_y
         self.refresh()
         self._announce()
 
