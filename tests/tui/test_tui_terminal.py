@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, eg2scope
 
 from analyzer.recording import MARKS, McapCaptureReader, read_metadata
 
@@ -350,3 +350,12 @@ def test_sigterm_before_the_end_of_a_replay_is_an_interruption(inputs: dict[str,
             term.child.terminate(force=True)
     assert status == 130, term.after()
     assert "stopped at" in term.after()
+
+
+def test_without_a_terminal_the_engine_usage_error_comes_first() -> None:
+    """Usage errors of the command line before "the TUI needs a terminal"."""
+    done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"), "--engine", "native")
+    assert done.returncode == 2
+    assert "--engine native" in done.stderr and "needs a terminal" not in done.stderr
+    done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"))
+    assert done.returncode == 2 and "needs a terminal" in done.stderr
