@@ -9,7 +9,7 @@ from contextlib import ExitStack, redirect_stderr
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..batches import ENGINES
+from ..batches import ENGINES, session_engine
 from ..errors import EXIT_ERROR, UsageError
 from ..listener import Listener
 from ..rerun_target import add_rerun_argument, rerun_listener
@@ -189,11 +189,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.file and args.demo:
         raise UsageError("give a capture file or --demo, not both")
-    if not sys.stdout.isatty():
-        raise UsageError(
-            "the TUI needs a terminal; for text use 'eg2scope live', 'eg2scope demo' or "
-            "'eg2scope decode'"
-        )
+    if args.file:
+        check_capture_engine(args)  # a usage error of the command line comes first
+    require_terminal()
     notes = Notes()
     with ExitStack() as stack:
         if args.demo:
@@ -218,12 +216,42 @@ def run(args: argparse.Namespace) -> int:
     return finish(args, app, notes)
 
 
+def check_capture_engine(args: argparse.Namespace) -> None:
+    """UsageError if ``--engine`` cannot decode the capture (asked before the terminal is, and
+    before any output such as ``--rerun``'s file is made)."""
+    if args.engine == "auto":
+        return
+    with open_reader(CaptureOptions.from_args(args)) as reader:
+        try:
+            session_engine(args.engine, reader.kind, reader.single_stream)
+        except ValueError as exc:
+            raise UsageError(f"--engine {args.engine}: {exc}") from None
+
+
+def require_terminal() -> None:
+    if not sys.stdout.isatty():
+        raise UsageError(
+            "the TUI needs a terminal; for text use 'eg2scope live', 'eg2scope demo' or "
+            "'eg2scope decode'"
+        )
+
+
+def summary_line(args: argparse.Namespace, app: Eg2ScopeApp) -> str:
+    """What the session did: of a capture, what was read of it; live, what was captured."""
+    counts = app.session.counts
+    replay = app.plan.replay
+    if replay is None:
+        where = f" into {args.output}" if args.output else ""
+        return f"{counts.line()}{where}"
+    read = "read to its end" if replay.finished else f"stopped at {replay.position:.0%}"
+    return f"{args.file}: {read}, {counts.records:,} records decoded, {counts.errors:,} with errors"
+
+
 def finish(args: argparse.Namespace, app: Eg2ScopeApp, notes: Notes) -> int:
     """After the app has gone: what happened, on stderr, and the exit status."""
     notes.print(sys.stderr)
     session = app.session
-    where = f" into {args.output}" if args.output else ""
-    print(f"eg2scope: {session.counts.line()}{where}", file=sys.stderr)
+    print(f"eg2scope: {summary_line(args, app)}", file=sys.stderr)
     for listener, exc in session.detached:
         label = getattr(listener, "label", type(listener).__name__)
         print(f"eg2scope: error: {label} failed: {exc}", file=sys.stderr)
@@ -237,7 +265,11 @@ def finish(args: argparse.Namespace, app: Eg2ScopeApp, notes: Notes) -> int:
     if crashed or app.failure is not None:
         return EXIT_ERROR
     damaged = bool(session.source.errors)
-    return exit_code(session.counts, damaged=damaged, failed=bool(session.detached))
+    counts = session.counts
+    if app.plan.replay is not None and app.plan.replay.finished:
+        # the whole capture was read: whatever stopped the app afterwards cut nothing off
+        counts = replace(counts, interrupted=False)
+    return exit_code(counts, damaged=damaged, failed=bool(session.detached))
 
 
 def _stop_app(app: Any) -> None:

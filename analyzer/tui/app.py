@@ -25,7 +25,7 @@ from textual.binding import BindingType
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.timer import Timer
-from textual.widgets import Footer, Input, RichLog, Static, TabbedContent, TabPane
+from textual.widgets import Footer, Input, Static, TabbedContent, TabPane
 from textual.worker import Worker, WorkerState
 
 from ..model import ERROR, LEVEL_NAMES, SourceEvent
@@ -36,7 +36,14 @@ from .export import export, export_format
 from .feed import TRIGGERS, TuiFeed
 from .filter import FilterError, parse
 from .layout import HEIGHT_BREAKPOINTS, WIDTH_BREAKPOINTS
-from .messages import ByteSelected, FeedUpdate, FieldSelected, JumpTo, RowSelected
+from .messages import (
+    ByteSelected,
+    FeedUpdate,
+    FieldSelected,
+    FilterCancelled,
+    JumpTo,
+    RowSelected,
+)
 from .notes import Notes
 from .replay import ReplaySource, next_speed, speed_text
 from .rows import TimeMode
@@ -44,6 +51,8 @@ from .screens import HelpScreen, PromptScreen
 from .store import RecordStore
 from .widgets.detail import DetailTree, HexPane
 from .widgets.devices import DevicePanel
+from .widgets.event_log import EventLog
+from .widgets.filter_box import FilterBox
 from .widgets.frame_list import FrameList
 from .widgets.latency import LatencyPanel
 from .widgets.problems import ProblemsPanel
@@ -95,6 +104,7 @@ class Eg2ScopeApp(App[int]):
         self.failure: BaseException | None = None  # what the session's thread raised
         self.awaiting_letter: tuple[str, Callable[[str], None]] | None = None  # m, '
         self.done = False
+        self.damage: list[str] = []  # what the source found wrong with its input, at its end
         self.captured = 0
         self.dropped = 0
         self.trigger: str | None = plan.freeze_on
@@ -113,7 +123,7 @@ class Eg2ScopeApp(App[int]):
         with Horizontal(id="main"):
             with Vertical(id="left"):
                 yield FrameList(self.store, id="frames")
-                yield Input(placeholder="filter: dev == 1 and bus == can0", id="filter")
+                yield FilterBox(placeholder="filter: dev == 1 and bus == can0", id="filter")
                 yield Static("", id="filter-error")
                 yield Static("", id="status")
             with Vertical(id="right"):
@@ -129,9 +139,9 @@ class Eg2ScopeApp(App[int]):
             with TabPane("Latency", id="latency"):
                 yield LatencyPanel(id="latency-panel")
             with TabPane("Events", id="events"):
-                yield RichLog(id="event-log", max_lines=2000, markup=False)
+                yield EventLog(id="event-log")
         yield Static("", id="letter-prompt")
-        yield Footer()
+        yield Footer(compact=True)  # compact: 80 columns hold every key
 
     @property
     def main_screen(self) -> Screen[Any]:
@@ -174,7 +184,7 @@ class Eg2ScopeApp(App[int]):
             return  # printed on exit all the same
         text = self.failure_text()
         self.notify(text, title="session failed", severity="error", timeout=3600)
-        self.main_screen.query_one("#event-log", RichLog).write(
+        self.main_screen.query_one(EventLog).add(
             self._event_line(SourceEvent(time.time(), "session", ERROR, text, "failed"))
         )
         self.done = True
@@ -222,14 +232,31 @@ class Eg2ScopeApp(App[int]):
         if update.snapshot is not None:
             self.snapshot = update.snapshot
             self.panels_stale = True
-        log = self.main_screen.query_one("#event-log", RichLog)
+        log = self.main_screen.query_one(EventLog)
         for event in update.events:
-            log.write(self._event_line(event))
+            log.add(self._event_line(event))
         if update.trigger is not None:
             self._freeze(update.trigger)
         if update.done:
             self.done = True
+            self._ended()
             self.show_panels()
+
+    def _ended(self) -> None:
+        """The session is over: the damage its source found is said at once (a notification,
+        the Events tab, the status line; ``eg2scope tui`` prints it again on exit), and the
+        panels that stayed empty say so for good."""
+        screen = self.main_screen
+        log = screen.query_one(EventLog)
+        self.damage = list(getattr(self.session.source, "errors", []))
+        for text in self.damage:
+            self.notify(text, title="damaged input", severity="error", timeout=30)
+            log.add(self._event_line(SourceEvent(time.time(), "capture", ERROR, text, "damaged")))
+        what = "session" if self.plan.live else "capture"
+        log.ended(what)
+        screen.query_one(DevicePanel).ended(what)
+        screen.query_one(LatencyPanel).ended(what)
+        self.show_status()
 
     def show_panels(self) -> None:
         """Redraw the visible panel (``PANELS_S``; hidden ones are drawn when shown)."""
@@ -297,6 +324,8 @@ class Eg2ScopeApp(App[int]):
             parts.append("capture ended")
         else:
             parts.append("live")
+        if self.damage:
+            parts.append("INPUT DAMAGED (see Events)")
         if frames.follow:
             parts.append("following")
         else:
@@ -446,6 +475,20 @@ class Eg2ScopeApp(App[int]):
         error.display = False
         event.input.remove_class("-invalid")
 
+    @on(FilterCancelled)
+    def filter_cancelled(self) -> None:
+        """Esc: the box shows the filter that is applied again (hidden if none) and the list
+        takes the keys back."""
+        applied = self.frames.filter
+        box = self.main_screen.query_one("#filter", Input)
+        with box.prevent(Input.Changed):
+            box.value = "" if applied is None else applied.text
+        box.remove_class("-invalid")
+        box.display = applied is not None
+        self.main_screen.query_one("#filter-error", Static).display = False
+        self.frames.focus()
+        self.notify(f"filter edit cancelled; {self.applied_filter_text()}")
+
     @on(Input.Submitted, "#filter")
     def filter_submitted(self, event: Input.Submitted) -> None:
         try:
@@ -543,8 +586,10 @@ class Eg2ScopeApp(App[int]):
             letter = event.character or ""
             if len(letter) == 1 and letter.isalpha():
                 then(letter)
+            elif event.key == "escape":
+                self.notify("cancelled")
             else:
-                self.notify("no letter: cancelled")
+                self.notify(f"{event.key} is not a letter: cancelled")
             return
         await super().on_event(event)
 

@@ -16,7 +16,7 @@ class Key:
     keys: str  # Textual key names, comma separated
     action: str
     description: str
-    footer: bool = False
+    footer: str = ""  # its word in the footer ("": not in the footer); short: 80 columns hold all
     shown: str = ""  # how the help writes the key, when not the key names
     # taken as the app reads the key, before any widget (the m/' of marks: the letter that
     # follows must find the app waiting for it); not while a text box takes the key
@@ -24,33 +24,33 @@ class Key:
 
 
 KEYS: Final[tuple[Key, ...]] = (
-    Key("question_mark,f1", "help", "help: every key", True, "? F1"),
-    Key("q", "quit", "quit (ends the capture and finishes the recording)", True),
-    Key("space", "pause", "pause/resume the view (live) or the replay (captures)", True),
-    Key("end,G", "follow", "follow the newest frame again", False, "End G"),
-    Key("slash,f", "filter", "display filter (e.g. dev == 1 and bus == can0)", True, "/ f"),
-    Key("ctrl+f", "search", "search: highlight matches; n/N move between them", False),
-    Key("n", "next_problem", "next search match, or next problem frame", False),
-    Key("N", "previous_problem", "previous search match, or previous problem frame", False),
-    Key("p", "pair", "jump to the paired request/response", True),
-    Key("t", "time_reference", "set/clear the time reference on this frame", False),
-    Key("T", "time_mode", "time column: relative, absolute, delta, reference", True),
-    Key("m", "set_mark", "mark this frame: m then a letter", False, priority=True),
-    Key("apostrophe", "goto_mark", "jump to a mark: ' then a letter", False, "'", priority=True),
-    Key("ctrl+g", "goto", "go to a frame number or a time (t=12.5)", False),
-    Key("x", "arm_trigger", "arm/disarm the trigger (freeze on the first match)", False),
-    Key("plus,equals_sign", "faster", "replay faster (1x 2x 5x 10x max)", False, "+"),
-    Key("minus", "slower", "replay slower", False, "-"),
-    Key("e", "export", "export the shown (or marked a..b) records: JSONL, CSV, MCAP", True),
-    Key("1", "tab('devices')", "device panel", False),
-    Key("2", "tab('problems')", "problems panel (Enter jumps)", False),
-    Key("3", "tab('registers')", "register watch of the selected gripper", False),
-    Key("4", "tab('latency')", "latency per command", False),
-    Key("5", "tab('events')", "source events", False),
-    Key("d", "toggle_detail", "detail pane: hide/show (narrow: swap with the list)", False),
-    Key("tab", "focus_next", "next pane (frames, detail, hex, panels)", False),
-    Key("ctrl+t", "toggle_dark", "light/dark theme", False),
-    Key("ctrl+p", "command_palette", "command palette: every action", False),
+    Key("question_mark,f1", "help", "help: every key", "help", "? F1"),
+    Key("q", "quit", "quit (ends the capture and finishes the recording)", "quit"),
+    Key("space", "pause", "pause/resume the view (live) or the replay (captures)", "pause"),
+    Key("end,G", "follow", "follow the newest frame again", "", "End G"),
+    Key("slash,f", "filter", "display filter (e.g. dev == 1 and bus == can0)", "filter", "/ f"),
+    Key("ctrl+f", "search", "search: highlight matches; n/N move between them"),
+    Key("n", "next_problem", "next search match, or next problem frame"),
+    Key("N", "previous_problem", "previous search match, or previous problem frame"),
+    Key("p", "pair", "jump to the paired request/response", "pair"),
+    Key("t", "time_reference", "set/clear the time reference on this frame"),
+    Key("T", "time_mode", "time column: relative, absolute, delta, reference", "time"),
+    Key("m", "set_mark", "mark this frame: m then a letter", priority=True),
+    Key("apostrophe", "goto_mark", "jump to a mark: ' then a letter", "", "'", priority=True),
+    Key("ctrl+g", "goto", "go to a frame number or a time (t=12.5)"),
+    Key("x", "arm_trigger", "arm/disarm the trigger (freeze on the first match)"),
+    Key("plus,equals_sign", "faster", "replay faster (1x 2x 5x 10x max)", "", "+"),
+    Key("minus", "slower", "replay slower", "", "-"),
+    Key("e", "export", "export the shown (or marked a..b) records: JSONL, CSV, MCAP", "export"),
+    Key("1", "tab('devices')", "device panel"),
+    Key("2", "tab('problems')", "problems panel (Enter jumps)"),
+    Key("3", "tab('registers')", "register watch of the selected gripper"),
+    Key("4", "tab('latency')", "latency per command"),
+    Key("5", "tab('events')", "source events"),
+    Key("d", "toggle_detail", "detail pane: hide/show (narrow: swap with the list)"),
+    Key("tab", "focus_next", "next pane (frames, detail, hex, panels)"),
+    Key("ctrl+t", "toggle_dark", "light/dark theme"),
+    Key("ctrl+p", "command_palette", "command palette: every action"),
 )
 
 LIST_KEYS: Final[tuple[tuple[str, str], ...]] = (
@@ -68,8 +68,8 @@ def bindings() -> list[BindingType]:
         Binding(
             k.keys,
             k.action,
-            k.description.split(":")[0].split(" (")[0],
-            show=k.footer,
+            k.footer or k.description.split(":")[0].split(" (")[0],
+            show=bool(k.footer),
             priority=k.priority,
             id=f"eg2scope.{k.action.split('(')[0]}.{k.keys.split(',')[0]}",
         )

@@ -88,3 +88,7 @@ class DeviceChosen(Message):
     def __init__(self, key: DeviceKey) -> None:
         super().__init__()
         self.key = key
+
+
+class FilterCancelled(Message):
+    """Esc in the display filter's box: the edit is dropped, the applied filter stays."""

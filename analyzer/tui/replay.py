@@ -5,7 +5,8 @@
 are let through when their capture time, divided by the speed, has come on the wall clock; a
 speed change or a resume starts the mapping afresh, so nothing jumps. While paused or waiting it
 yields empty batches every ``IDLE_S`` so the session keeps ticking its listeners (the screen,
-marks into a recording). ``position`` (0-1) is how far through the file the replay is.
+marks into a recording). ``position`` (0-1) is how far through the file the replay is;
+``finished``, whether it was read to its end (a stop before that leaves it False).
 """
 
 from __future__ import annotations
@@ -112,9 +113,13 @@ class ReplaySource(CaptureSource):
                 batch = []
             if stop.is_set():
                 break
+        else:
+            if batch:
+                yield batch
+            self.finished = True  # read to its end: a stop from now on cuts nothing off
+            return
         if batch:
             yield batch
-        self.finished = True
 
     def _pause(self, batch: Batch, stop: threading.Event) -> Iterator[Batch]:
         if batch:

@@ -6,7 +6,9 @@ Column widths follow the list's width (``layout.row_layout``); whatever is cut e
    1234    12.345678 can0   → ID 1     CMD_OPENLEN_SET          write target_opening=0  0.41 ms
 ```
 
-The gutter before the number marks problems (``MARKERS``), or the letter of a mark.
+The gutter before the number marks problems (``MARKERS``), or the letter of a mark. Where the
+number column is left out (a narrow list), a record without a time shows its number (``#seq``:
+a raw dump's byte offset) in the time column instead of a bare ``-``.
 """
 
 from __future__ import annotations
@@ -138,12 +140,14 @@ def render_row(
     text.append(f"{mark or marker:1}", style or STYLE_SEQ)
     if cols.seq:
         text.append(f"{store.seq[i]:>{cols.seq}} ", STYLE_SEQ)
-    time_text = (
-        "*REF*".rjust(cols.time)
-        if is_reference
-        else format_time(store, i, mode, previous, reference, cols.time)
-    )
-    text.append(time_text, STYLE_REF if is_reference else STYLE_TIME)
+    untimed = math.isnan(store.t[i])
+    if is_reference:
+        time_text = "*REF*".rjust(cols.time)
+    elif untimed and not cols.seq:  # no time and no number column: the number, for go-to
+        time_text = f"#{store.seq[i]}".rjust(cols.time)
+    else:
+        time_text = format_time(store, i, mode, previous, reference, cols.time)
+    text.append(time_text, STYLE_REF if is_reference else STYLE_SEQ if untimed else STYLE_TIME)
     text.append(f" {fit(store.bus_of(i), cols.bus)} {ARROWS[store.direction[i]]} ")
     text.append(fit("-" if device is None else f"ID {device}", cols.device) + " ")
     text.append(fit(store.name_of(i), cols.name) + " ", style or Style(bold=True))

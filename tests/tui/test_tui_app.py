@@ -6,7 +6,9 @@ status line and the panels say what they show."""
 from __future__ import annotations
 
 import asyncio
+import gzip
 import io
+import random
 from pathlib import Path
 
 import pytest
@@ -14,18 +16,23 @@ from conftest import CAPTURES, SIZES, capture_app, demo_app, driving, tui_args, 
 from rich.console import Console
 from textual.command import CommandList, CommandPalette
 from textual.widgets import Input, RichLog, Static
+from textual.widgets._footer import FooterKey
 
 from analyzer.commands.common import CaptureOptions, open_reader
-from analyzer.commands.tui import finish
+from analyzer.commands.tui import finish, summary_line
 from analyzer.session import Session, SessionOptions
 from analyzer.sim.rig import DemoRig
 from analyzer.tui.aggregates import LATENCY_KEEP, Aggregates
 from analyzer.tui.app import Eg2ScopeApp, SessionPlan
+from analyzer.tui.layout import row_layout
 from analyzer.tui.notes import Notes
 from analyzer.tui.replay import ReplaySource
-from analyzer.tui.rows import MARKERS
+from analyzer.tui.rows import MARKERS, plain_row
 from analyzer.tui.screens import HelpScreen
+from analyzer.tui.widgets.detail import DetailTree
 from analyzer.tui.widgets.devices import DevicePanel
+from analyzer.tui.widgets.event_log import EMPTY as EVENTS_EMPTY
+from analyzer.tui.widgets.latency import LatencyPanel
 from decoders.model import REQUEST, RESPONSE, Record
 
 
@@ -252,3 +259,176 @@ def test_notes_of_outputs_are_shown_and_kept_for_the_end() -> None:
     out = io.StringIO()
     notes.print(out)
     assert out.getvalue().splitlines() == [shown[0], "second"]
+
+
+def damaged_captures(folder: Path, inputs: dict[str, Path]) -> dict[str, Path]:
+    """Damaged inputs of every reader: random bytes named .log, a candump log and a recording
+    cut mid-record, a gzip raw dump cut short."""
+    made = {"random.log": folder / "random.log", "cut.log": folder / "cut.log"}
+    made["random.log"].write_bytes(random.Random(7).randbytes(3000))
+    log = (CAPTURES / "can_pick_place.log").read_bytes()
+    made["cut.log"].write_bytes(log[:1000])  # ends in the middle of a line
+    data = inputs["demo recording"].read_bytes()
+    made["cut.mcap"] = folder / "cut.mcap"
+    made["cut.mcap"].write_bytes(data[: len(data) * 2 // 3])
+    made["cut.bin.gz"] = folder / "cut.bin.gz"
+    packed = gzip.compress((CAPTURES / "serial_session.bin").read_bytes())
+    made["cut.bin.gz"].write_bytes(packed[: len(packed) - 12])
+    return made
+
+
+DAMAGED = [
+    ("random.log", ()),
+    ("cut.log", ()),
+    ("cut.log", ("--engine", "python")),
+    ("cut.mcap", ()),
+    ("cut.bin.gz", ()),
+]
+
+
+@pytest.mark.parametrize(("name", "argv"), DAMAGED, ids=[f"{n} {' '.join(a)}" for n, a in DAMAGED])
+def test_damage_is_shown_in_the_tui_at_once_and_printed_on_exit(
+    tmp_path: Path, inputs: dict[str, Path], capsys, name: str, argv: tuple[str, ...]
+) -> None:
+    """What the reader found wrong is a notification, an Events line and the status line as
+    soon as the replay has ended, not only after q; still printed on exit, exit 3."""
+    path = damaged_captures(tmp_path, inputs)[name]
+
+    async def scenario() -> Eg2ScopeApp:
+        app = capture_app(path, *argv)
+        async with driving(app, SIZES["80x24"]) as pilot:
+            await until(pilot, lambda: app.done)
+            await pilot.pause(0.2)
+            errors = app.session.source.errors
+            assert errors, "the reader found no damage"
+            shown = [n.message for n in app._notifications]
+            assert errors[0] in shown, shown
+            assert "INPUT DAMAGED (see Events)" in status(app)
+            await pilot.press("5")
+            await pilot.pause(0.3)
+            lines = [line.text for line in app.query_one("#event-log", RichLog).lines]
+            assert any(errors[0][:60] in line for line in lines), lines
+            await pilot.press("q")
+        return app
+
+    app = asyncio.run(scenario())
+    assert finish(tui_args(str(path), *argv), app, Notes()) == 3
+    err = capsys.readouterr().err
+    assert app.session.source.errors[0] in err
+
+
+def test_empty_panels_say_so_once_a_capture_has_ended(tmp_path: Path) -> None:
+    """A capture with no gripper, no answer and no event: each panel says there were none in
+    the capture (not "yet"); a gripper heard in a capture without times is "heard", not
+    "never"; the exit line says what was read of the file."""
+    path = tmp_path / "random.log"
+    path.write_bytes(random.Random(7).randbytes(3000))
+
+    async def scenario() -> None:
+        app = capture_app(path)
+        async with driving(app, SIZES["80x24"]) as pilot:
+            await until(pilot, lambda: app.done)
+            await pilot.pause(0.2)
+            assert app.query_one(DevicePanel).lines[0].plain == "no gripper heard in this capture"
+            await pilot.press("4")
+            await pilot.pause(0.2)
+            latency = str(app.query_one(LatencyPanel).render())
+            assert latency == "no answered requests in this capture"
+            await pilot.press("q")
+
+    asyncio.run(scenario())
+
+    async def events_and_ages() -> Eg2ScopeApp:
+        app = capture_app(CAPTURES / "serial_session.bin")
+        async with driving(app, SIZES["80x24"]) as pilot:
+            log = app.query_one("#event-log", RichLog)
+            await pilot.press("5")
+            await pilot.pause(0.2)
+            assert [line.text for line in log.lines] == [EVENTS_EMPTY] or app.done
+            await until(pilot, lambda: app.done)
+            await pilot.pause(0.2)
+            assert [line.text.strip() for line in log.lines] == ["no events in this capture"]
+            panel = app.query_one(DevicePanel)
+            panel.redraw()
+            rows = {line.plain.split()[1]: line.plain.rstrip() for line in panel.lines[1:]}
+            assert rows["1"].endswith("heard") and rows["2"].endswith("never"), rows
+            await pilot.press("q")
+        return app
+
+    app = asyncio.run(events_and_ages())
+    line = summary_line(tui_args(str(CAPTURES / "serial_session.bin")), app)
+    assert line.endswith("serial_session.bin: read to its end, 27 records decoded, 3 with errors")
+
+
+def test_untimed_rows_show_their_number_where_the_list_has_no_number_column() -> None:
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "serial_session.bin")
+        async with driving(app, SIZES["80x24"]) as pilot:
+            await until(pilot, lambda: app.done)
+            store = app.store
+            width = app.frames.scrollable_content_region.width
+            assert row_layout(width).seq == 0  # 80 columns: no number column
+            for i in range(store.count):
+                row = plain_row(store, i, width=width)
+                assert row[1:13].strip() == f"#{store.seq[i]}", row
+            wide = plain_row(store, 0, width=200)  # the number has its own column there
+            assert wide.split()[0] == str(store.seq[0]) and wide.split()[1] == "-"
+            await pilot.press("q")
+
+    asyncio.run(scenario())
+
+
+def shown_line(widget, y: int = 0) -> str:
+    """Line ``y`` of ``widget`` as the screen shows it (the screen's own composition)."""
+    strips = widget.screen._compositor.render_strips()
+    region = widget.scrollable_content_region
+    return strips[region.y + y].crop(region.x, region.right).text
+
+
+@pytest.mark.parametrize("size", list(SIZES))
+def test_whatever_is_cut_ends_in_an_ellipsis(size: str) -> None:
+    """The detail tree, the status line, the filter's error line and the footer: nothing runs
+    past its pane or is cut without a mark, at 80x24, 120x35 and 200x50."""
+
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "can_pick_place.log")
+        async with driving(app, SIZES[size]) as pilot:
+            await until(pilot, lambda: app.done)
+            frames, store = app.frames, app.store
+            if size == "80x24":
+                await pilot.press("d")  # the detail pane instead of the list
+            tree = app.query_one(DetailTree)
+            await until(pilot, lambda: tree.size.width > 0)  # the pane is laid out
+            for i in range(store.count):  # the error frame, the pairs, everything
+                app._show_detail(i)
+                await pilot.pause()
+                room = tree.scrollable_content_region.width
+                assert tree.virtual_size.width <= room  # nothing past the pane's edge
+                for y in range(min(tree.last_line + 1, tree.size.height)):
+                    node = tree.get_node_at_line(y + tree.scroll_offset.y)
+                    full = node.label.plain if node is not None else ""
+                    line = shown_line(tree, y).rstrip()
+                    if full and not line.endswith(full):
+                        assert line.endswith("…"), (line, full)
+            if size == "80x24":
+                await pilot.press("d")
+            frames.focus()
+            footer_keys = list(app.query(FooterKey))
+            palette = next(k for k in footer_keys if k.has_class("-command-palette"))
+            for key in footer_keys:
+                if key is not palette:
+                    assert key.region.right <= palette.region.x, key.description
+            app.action_filter()
+            box = app.query_one("#filter", Input)
+            box.value = "dev == 1"
+            await pilot.press("enter")
+            box.value = "dev == 1 and bus == can0 and name ~ CMD_FORCE_ACT and latency > 500 or"
+            await pilot.pause(0.3)
+            for name in ("#status", "#filter-error"):
+                widget = app.query_one(name, Static)
+                text = str(widget.render())
+                line = shown_line(widget).strip()
+                assert line == text or line.endswith("…"), (name, line, text)
+            await pilot.press("escape", "q")
+
+    asyncio.run(scenario())

@@ -22,8 +22,7 @@ async def replayed(pilot) -> None:
     # the detail pane follows the newest record a moment later (DETAIL_FOLLOW_S)
     await until(pilot, lambda: app.query_one(DetailTree).record is not None)
     await until(pilot, lambda: app.frames.known == app.store.count)
-    app.frames.action_follow()  # the newest row in view, whenever the layout came
-    await pilot.pause()
+    await pilot.pause()  # following: the newest row is in view without help
     app.query_one(DevicePanel).changed_at.clear()  # highlights fade with wall time
     app.show_panels()
     await pilot.pause()

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import json
 import re
+import signal
 import sys
 import time
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, eg2scope
 
 from analyzer.recording import MARKS, McapCaptureReader, read_metadata
 
@@ -21,7 +22,8 @@ pyte = pytest.importorskip("pyte")
 pytestmark = pytest.mark.slow
 
 COLUMNS, LINES = 200, 50
-ROW = re.compile(r"^.\s*(?:\d+\s+)?(-|[\d.]+)\s+(\S+)\s+([→←·])\s+(ID \d+|-)\s+(\S+)")
+# a row: [seq] time (or, for a record without one in a narrow list, #seq) bus dir ID name
+ROW = re.compile(r"^.\s*(?:\d+\s+)?(-|#\d+|[\d.]+)\s+(\S+)\s+([→←·])\s+(ID \d+|-)\s+(\S+)")
 
 
 class Terminal:
@@ -157,7 +159,7 @@ def test_every_input_in_a_real_terminal(inputs: dict[str, Path], kind: str, size
         reached: dict[str, float] = {}  # a bus's own clock may step back: its order is kept
         keys = []
         for m in rows:
-            if m.group(1) != "-":
+            if m.group(1)[0] not in "-#":
                 t = float(m.group(1))
                 keys.append(
                     reached.setdefault(m.group(2), t) if t < reached.get(m.group(2), t) else t
@@ -233,3 +235,127 @@ def test_an_engine_that_cannot_apply_is_a_usage_error() -> None:
     term.child.close()
     assert term.child.exitstatus == 2
     assert b"--engine native" in term.child.before
+
+
+def finished(term: Terminal, timeout: float = 30.0) -> int | None:
+    """The exit status once the process has gone by itself."""
+    end = time.monotonic() + timeout
+    while term.child.isalive() and time.monotonic() < end:
+        term.read()
+    term.read()
+    if term.child.isalive():
+        term.child.terminate(force=True)
+        pytest.fail(f"still running {timeout} s on; the screen:\n{term.text()}")
+    term.child.close()
+    return term.child.exitstatus
+
+
+@pytest.mark.parametrize("size", list(SIZES))
+def test_esc_cancels_the_filter_and_the_mark_prompt_then_q_quits(size: str) -> None:
+    """/ then Esc: the box goes and the list has the keys again (q quits, not typed in); an
+    invalid filter then Esc: the applied filter stays, said so; m then Esc cancels the mark."""
+    term = Terminal(tui(str(ROOT / "captures" / "can_pick_place.log")), SIZES[size])
+    try:
+        term.wait_for("replay done")
+        term.type("/", gap=0.3)
+        term.type("\x1b", gap=0.5)  # Esc alone: a terminal sends no more after it
+        term.wait_for("filter edit cancelled")  # the toast: "...; everything is shown"
+        term.type("/dev == 1\r", gap=0.1)
+        term.wait_for("of 91 shown")
+        term.type("/", gap=0.3)  # the box takes the keys again, its text selected
+        term.type("dev == 1 and", gap=0.1)
+        term.wait_for("not applied")
+        term.type("\x1b", gap=1.0)
+        screen = term.text()
+        assert "not applied" not in screen  # the error line went with the edit
+        assert "dev == 1 and" not in screen and "dev == 1" in screen  # the applied one, back
+        assert "of 91 shown" in screen
+        term.type("m", gap=0.3)
+        term.wait_for("mark this frame")
+        term.type("\x1b", gap=0.5)
+        term.wait_for("cancelled")
+        assert "mark this frame" not in term.text() and "marks" not in term.text()
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+
+
+def cut_candump_log(folder: Path) -> Path:
+    out = folder / "cut.log"
+    out.write_bytes((ROOT / "captures" / "can_pick_place.log").read_bytes()[:1000])
+    return out
+
+
+@pytest.mark.parametrize("kind", ["serial dump", "cut candump log"])
+def test_following_shows_the_newest_row_of_a_small_replay_at_80x24(
+    tmp_path: Path, inputs: dict[str, Path], kind: str
+) -> None:
+    """A capture decoded in one update, shorter than two screens: "following" shows its
+    newest record (the truncated frame at its end), not its first page."""
+    path = inputs[kind] if kind in inputs else cut_candump_log(tmp_path)
+    term = Terminal(tui(str(path)), SIZES["80x24"])
+    try:
+        screen = term.wait_for("replay done")
+        time.sleep(1.0)  # the list has laid out its final size
+        term.read()
+        screen = term.text()
+        assert "following" in screen
+        rows = [line for line in screen.splitlines() if ROW.match(line)]
+        assert rows, screen
+        last = rows[-1]
+        if kind == "serial dump":
+            assert "truncated frame (9 bytes)" in last, screen
+        else:  # the last whole line of the log: device 1's answer, 64.34 ms in
+            assert "0.064340" in last and "←" in last and "ID 1" in last, screen
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status in (0, 3), term.after()
+
+
+@pytest.mark.parametrize(
+    ("kind", "want"), [("serial dump", 0), ("cut candump log", 3), (".blf", 0)]
+)
+def test_sigterm_after_a_finished_replay_is_no_interruption(
+    tmp_path: Path, inputs: dict[str, Path], kind: str, want: int
+) -> None:
+    """The whole capture was read: SIGTERM (as q and Ctrl+C) ends it 0, or 3 if damaged."""
+    path = inputs[kind] if kind in inputs else cut_candump_log(tmp_path)
+    term = Terminal(tui(str(path)), SIZES["80x24"])
+    try:
+        term.wait_for("replay done")
+        time.sleep(0.5)
+        term.child.kill(signal.SIGTERM)
+        status = finished(term)
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == want, term.after()
+    assert "read to its end" in term.after()
+
+
+def test_sigterm_before_the_end_of_a_replay_is_an_interruption(inputs: dict[str, Path]) -> None:
+    """A replay in real time (--speed 1) stopped part-way: 130, and it says how far it got."""
+    term = Terminal(tui(str(inputs["demo recording"]), "--speed", "1"), SIZES["80x24"])
+    try:
+        term.wait_for("replay playing")
+        time.sleep(0.5)
+        term.child.kill(signal.SIGTERM)
+        status = finished(term)
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 130, term.after()
+    assert "stopped at" in term.after()
+
+
+def test_without_a_terminal_the_engine_usage_error_comes_first() -> None:
+    """Usage errors of the command line before "the TUI needs a terminal"."""
+    done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"), "--engine", "native")
+    assert done.returncode == 2
+    assert "--engine native" in done.stderr and "needs a terminal" not in done.stderr
+    done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"))
+    assert done.returncode == 2 and "needs a terminal" in done.stderr

@@ -35,7 +35,7 @@ def _value_text(key: str, value: Any) -> str:
 class DetailTree(Tree[NodeData]):
     """The selected record's tree; a node's data is the span of its bytes (if known)."""
 
-    DEFAULT_CSS = "DetailTree { background: $surface; }"
+    DEFAULT_CSS = "DetailTree { background: $surface; overflow-x: hidden; }"
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("no frame selected", **kwargs)
@@ -112,6 +112,20 @@ class DetailTree(Tree[NodeData]):
                 problems.add_leaf(Text(text, style=style))
         for code in rec.flags:
             problems.add_leaf(Text(f"{code}: {DESCRIPTIONS.get(code, '')}", style="dim"))
+
+    def render_label(self, node: TreeNode[NodeData], base_style: Style, style: Style) -> Text:
+        """The label cut to the pane's width with an ellipsis (the tree would otherwise run
+        past the pane's edge, cut there without a mark)."""
+        label = super().render_label(node, base_style, style)
+        depth = 0
+        while node.parent is not None:
+            depth, node = depth + 1, node.parent
+        room = self.size.width - depth * self.guide_depth
+        if self.last_line >= self.size.height:  # the scroll bar (not laid out yet) takes a share
+            room -= self.styles.scrollbar_size_vertical
+        if room > 0 and label.cell_len > room:
+            label.truncate(room, overflow="ellipsis")
+        return label
 
     def select_offset(self, offset: int) -> None:
         """Select the field holding byte ``offset`` (from the hex pane)."""

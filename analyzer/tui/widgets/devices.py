@@ -8,7 +8,8 @@ On a narrow panel the columns a person watches stay (bus, ID, state, faults, lat
 then opening, force, temperature ...) and the others are left out (``columns_for``); a state or
 fault too long for its column is abbreviated (``SHORT_STATES``, ``SHORT_FAULTS``), never cut. A
 gripper whose state or faults were never read (one never heard, a broadcast ID) shows ``-``,
-not "none", and its age is "never": requests sent to it are not hearing from it."""
+not "none", and its age is "never": requests sent to it are not hearing from it. One heard in
+a capture without times shows "heard"."""
 
 from __future__ import annotations
 
@@ -78,9 +79,13 @@ def fault_words(fault: int | None, texts: list[str], width: int) -> str:
     return full if len(full) <= width else ",".join(SHORT_FAULTS.get(t, t) for t in texts)
 
 
-def age_text(age: float | None) -> Text:
-    if age is None:
+def age_text(age: float | None, heard: bool = True) -> Text:
+    """``age``: seconds since it was last heard; None with ``heard``: heard, but the capture
+    has no times."""
+    if not heard:
         return Text("never", style="dim")
+    if age is None:
+        return Text("heard", style="dim")
     if age >= LOST_S:
         return Text(f"LOST {age:.0f}s", style="bold red")
     if age >= STALE_S:
@@ -162,6 +167,13 @@ class DevicePanel(ScrollView):
         self._strips: dict[int, Strip] = {}
         self._width = -1  # the width the columns were chosen for
         self._kept, self._bar = columns_for(0)
+        self.empty_text = "no gripper heard yet"
+
+    def ended(self, what: str) -> None:
+        """The session is over (``what``: the capture, the session)."""
+        self.empty_text = f"no gripper heard in this {what}"
+        self._strips = {}
+        self.refresh()
 
     def take(self, rows: list[DeviceRow], changed: set[tuple[str, int, str]]) -> None:
         now = time.monotonic()
@@ -193,7 +205,7 @@ class DevicePanel(ScrollView):
     def lines(self) -> list[Text]:
         """Every line as of the last redraw: the heading, then one per gripper."""
         if not self._shown:
-            return [Text("no gripper heard yet")]
+            return [Text(self.empty_text)]
         return [self._line(position) for position in range(len(self._shown) + 1)]
 
     def _line(self, position: int) -> Text:
@@ -241,7 +253,7 @@ class DevicePanel(ScrollView):
         # heard: it answered (a latency) or something of it was read; requests sent to it
         # (one that never answers, a broadcast ID) are not hearing from it
         heard = v.get("latency_ms") is not None or any(v.get(k) is not None for k in READINGS)
-        age = None if clock is None or row.t is None or not heard else max(0.0, clock - row.t)
+        age = None if clock is None or row.t is None else max(0.0, clock - row.t)
         target = v.get("target_opening")
         return [
             row.bus,
@@ -263,5 +275,5 @@ class DevicePanel(ScrollView):
             Text(str(v.get("errors", 0)), style="red" if v.get("errors") else ""),
             Text(str(v.get("unanswered", 0)), style="magenta" if v.get("unanswered") else ""),
             "-" if lat is None else f"{lat.p50:.2f}/{lat.p95:.2f}",
-            age_text(age),
+            age_text(age, heard),
         ]

@@ -179,7 +179,12 @@ class FrameList(ScrollView, can_focus=True):
             target = position - height + 1 if position >= y + height else position
             if not follow:
                 target = max(0, position - height // 2)
-            self.scroll_to(y=target, animate=False, immediate=True)
+            # force: right after the list grew, its scroll bar is not shown until the next
+            # layout, and Textual would not scroll it (a small capture decoded in one update
+            # stayed on its first page while "following")
+            self.scroll_to(y=target, animate=False, immediate=True, force=True)
+            if not self.show_vertical_scrollbar:  # ... nor move the bar it is about to show
+                self.vertical_scrollbar.position = self.scroll_y
         self.refresh()
         self._announce()
 

@@ -23,10 +23,17 @@ class LatencyPanel(Static):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("no answered requests yet", **kwargs)
+        self.empty = True
+
+    def ended(self, what: str) -> None:
+        """The session is over (``what``: the capture, the session)."""
+        if self.empty:
+            self.update(f"no answered requests in this {what}")
 
     def take(self, stats: dict[str, LatencyStats]) -> None:
         if not stats:
             return
+        self.empty = False
         table = Table(expand=True, box=None)
         for name in ("command", "answers", "p50 ms", "p95 ms", "max ms", "0 .. max"):
             table.add_column(name, no_wrap=True, overflow="ellipsis")
