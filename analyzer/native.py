@@ -101,6 +101,21 @@ def ineligible(reader: CaptureReader, fmt: str, speed: float | None, device: int
     return ""
 
 
+def candump_frames(reader: CaptureReader) -> Any:
+    """The frames of ``reader``'s capture as the native core reads them for a session
+    (``_native.CandumpFrames``: the reader ``decode`` uses, batches of frames that the native
+    ``LiveCan`` decodes with no Python object per frame), or None: the Python reader reads it
+    (not a candump log on a regular file, or the core does not read it)."""
+    if _native is None or not hasattr(_native, "CandumpFrames"):
+        return None
+    if ineligible(reader, "jsonl", None, None):
+        return None
+    try:
+        return _native.CandumpFrames(str(reader.path), reader.bus or None)
+    except (_native.Unsupported, OSError):
+        return None  # the Python reader reads it (and says why it cannot, if it cannot)
+
+
 def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: bool | None) -> Any:
     """The native run of ``eg2scope decode`` with these options (``--engine``: auto where
     eligible; native or a UsageError saying why not), or None: the Python engine decodes. The
