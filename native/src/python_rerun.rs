@@ -90,24 +90,28 @@ impl<K: std::hash::Hash + Eq + Clone, V: Default> Ordered<K, V> {
     }
 }
 
-/// `_problem_text`: "ID 2 <summary, name or kind>: <errors and warnings>".
-fn problem_text(rec: &Record) -> String {
-    let who = rec.device.map(|d| format!("ID {d} ")).unwrap_or_default();
-    let what: &str = if !rec.summary.is_empty() {
+/// `_problem_text`: "ID 2 <summary, name or kind>: <errors and warnings>", into `out`.
+fn problem_text(rec: &Record, out: &mut String) {
+    use std::fmt::Write;
+    out.clear();
+    if let Some(d) = rec.device {
+        let _ = write!(out, "ID {d} ");
+    }
+    out.push_str(if !rec.summary.is_empty() {
         &rec.summary
     } else {
         match rec.name.as_deref() {
             Some(n) if !n.is_empty() => n,
             _ => rec.kind,
         }
-    };
-    let notes: Vec<&str> = rec
-        .errors
-        .iter()
-        .chain(&rec.warnings)
-        .map(String::as_str)
-        .collect();
-    format!("{who}{what}: {}", notes.join("; "))
+    });
+    out.push_str(": ");
+    for (i, note) in rec.errors.iter().chain(&rec.warnings).enumerate() {
+        if i > 0 {
+            out.push_str("; ");
+        }
+        out.push_str(note);
+    }
 }
 
 /// `rec.summary or rec.name`: a command in words.
@@ -138,6 +142,7 @@ pub fn rerun_log_rows<'py>(
     let mut buses: Ordered<usize, BusRows> = Ordered::new();
     let mut bus_names: FastMap<usize, Arc<str>> = FastMap::default();
     let mut grippers: Ordered<(usize, i64), GripperRows> = Ordered::new();
+    let mut text = String::with_capacity(256);
     for rec in &records.records {
         let problem = !rec.errors.is_empty() || !rec.warnings.is_empty();
         let command = rec.direction == Some(REQUEST) && !is_poll(rec);
@@ -152,9 +157,11 @@ pub fn rerun_log_rows<'py>(
                 !rec.flags.is_empty() && rec.flags.iter().all(|f| quiet.iter().any(|q| q == f));
             let bus = buses.get(bus_key);
             if !rec.errors.is_empty() {
-                bus.errors.push(rec, Some(problem_text(rec)), Level::Error);
+                problem_text(rec, &mut text);
+                bus.errors.push(rec, Some(text.clone()), Level::Error);
             } else if !nothing_wrong {
-                bus.errors.push(rec, Some(problem_text(rec)), Level::Warn);
+                problem_text(rec, &mut text);
+                bus.errors.push(rec, Some(text.clone()), Level::Warn);
             }
             if let Some(t) = rec.t {
                 if rec.kind != FRAME {
