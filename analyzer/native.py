@@ -14,7 +14,9 @@ that), so it is used automatically where it applies:
   analyzer/native_parquet.py), and there is no ``--speed`` (a timed replay).
 
 Other CAN captures (PCAN traces, python-can's formats, CAN recordings) are read in Python and
-decoded by the session, natively where the core is built (analyzer/batches.py); byte streams of
+decoded by the session, natively where the core is built (analyzer/batches.py); a session on a
+candump log (``plot``, ``tui``) gets its frames from the core's reader (``candump_frames``)
+when it decodes natively and no listener wants the raw items. Byte streams of
 recordings, live taps and the TUI stay with the Python decoders, the readable reference.
 ``--engine python`` forces the Python engine, ``--engine native`` the native one: the core's
 own decode where it applies, the session's native decoding for the other CAN captures, a usage
