@@ -519,7 +519,7 @@ impl DecodeRun {
     }
 
     /// Damage found in the input, as the Python readers' `errors` say it
-    /// ("line 12: cannot parse: ...", "x.bin.gz: compressed data damaged ..."), in order.
+    /// ("line 12: cannot parse: ...", "compressed data damaged ..."), in order.
     pub fn errors(&self) -> &[String] {
         &self.errors
     }
