@@ -246,6 +246,8 @@ class RerunOutput:
             return
         from .session import signals_as_interrupt  # SIGTERM and SIGHUP as Ctrl-C
 
+        # the address was printed before the data came: say when the viewer has all of it
+        print("eg2scope: everything is sent to the web viewer; Ctrl-C stops it", file=sys.stderr)
         try:
             with signals_as_interrupt():
                 while self.server.poll() is None:

@@ -149,6 +149,7 @@ def test_serve_web_binds_to_localhost_only_and_prints_a_webgl_url_once(tmp_path:
         with urllib.request.urlopen(url, timeout=10) as page:
             assert page.status == 200
         children = tree[1:]
+        before += wait_for_line(proc, "everything is sent")  # a Ctrl-C before it: exit 130
         proc.send_signal(signal.SIGINT)
         assert proc.wait(30) == 0
         assert not any(c.is_running() and c.status() != psutil.STATUS_ZOMBIE for c in children)
@@ -206,6 +207,17 @@ def test_the_web_viewer_ends_when_eg2scope_is_killed(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def wait_for_line(proc: subprocess.Popen[str], words: str) -> str:
+    """stderr up to the line that has ``words``."""
+    assert proc.stderr is not None
+    lines = []
+    while line := proc.stderr.readline():
+        lines.append(line)
+        if words in line:
+            return "".join(lines)
+    raise AssertionError(f"no line with {words!r}: {''.join(lines)}")
 
 
 def wait_for_serving(proc: subprocess.Popen[str]) -> tuple[str, str]:
