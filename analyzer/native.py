@@ -14,7 +14,9 @@ that), so it is used automatically where it applies:
   analyzer/native_parquet.py), and there is no ``--speed`` (a timed replay).
 
 Other CAN captures (PCAN traces, python-can's formats, CAN recordings) are read in Python and
-decoded by the session, natively where the core is built (analyzer/batches.py); byte streams of
+decoded by the session, natively where the core is built (analyzer/batches.py); a session on a
+candump log (``plot``, ``tui``) gets its frames from the core's reader (``candump_frames``)
+when it decodes natively and no listener wants the raw items. Byte streams of
 recordings, live taps and the TUI stay with the Python decoders, the readable reference.
 ``--engine python`` forces the Python engine, ``--engine native`` the native one: the core's
 own decode where it applies, the session's native decoding for the other CAN captures, a usage
@@ -99,6 +101,21 @@ def ineligible(reader: CaptureReader, fmt: str, speed: float | None, device: int
     except UnicodeDecodeError:
         return f"{path.name!r} is not a UTF-8 file name"
     return ""
+
+
+def candump_frames(reader: CaptureReader) -> Any:
+    """The frames of ``reader``'s capture as the native core reads them for a session
+    (``_native.CandumpFrames``: the reader ``decode`` uses, batches of frames that the native
+    ``LiveCan`` decodes with no Python object per frame), or None: the Python reader reads it
+    (not a candump log on a regular file, or the core does not read it)."""
+    if _native is None or not hasattr(_native, "CandumpFrames"):
+        return None
+    if ineligible(reader, "jsonl", None, None):
+        return None
+    try:
+        return _native.CandumpFrames(str(reader.path), reader.bus or None)
+    except (_native.Unsupported, OSError):
+        return None  # the Python reader reads it (and says why it cannot, if it cannot)
 
 
 def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: bool | None) -> Any:

@@ -248,7 +248,8 @@ class RerunOutput:
 
         try:
             with signals_as_interrupt():
-                # said once the handlers are in place: a Ctrl-C it prompts is a clean stop
+                # the address came before the data: say when the viewer has all of it, once
+                # the handlers are in place (a Ctrl-C it prompts is a clean stop)
                 print(
                     "eg2scope: everything is sent to the web viewer; Ctrl-C to stop it",
                     file=self.out,

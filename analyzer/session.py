@@ -36,7 +36,7 @@ from typing import Any
 from decoders.model import Record
 
 from . import interrupts
-from .batches import error_count, session_engine
+from .batches import NativeCanDecoding, error_count, session_engine
 from .listener import Listener
 from .model import ERROR, SourceEvent
 from .sources.live import CLOSED, LOST, Tap
@@ -98,6 +98,10 @@ class Session:
             opts.per_bus,
             opts.byte_time_s,
         )
+        if isinstance(self.decoding, NativeCanDecoding) and not any(
+            x.wants_raw for x in self.listeners
+        ):
+            source.read_natively()  # a capture's frames straight into the native decoding
         self.counts = SessionCounts(live=source.live)
         self.detached: list[tuple[Listener, BaseException]] = []
         self._stop = threading.Event()
@@ -175,7 +179,9 @@ class Session:
             for bus, protocol in list(named.items())[self._named :]:
                 decoding.set_protocol(bus, protocol)
             self._named = len(named)
-        items: list[Any] = []  # since the last event
+        items: Any = []  # since the last event
+        if not isinstance(batch, list):  # native frames (Source.read_natively): no events
+            items, batch = batch, []
         for x in batch:
             if isinstance(x, SourceEvent):
                 records = decoding.feed_items(items)

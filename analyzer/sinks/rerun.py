@@ -15,10 +15,12 @@ The hot path does as little per value as it can. A state sample is filed under i
 the fields it changed (its "shape": a CAN reply of force, opening, current and temperature is one
 shape, a reply of state and fault another): one C-level call cuts the plotted values out of it
 into the shape's row-major array, two appends add its time and seq; a shape's fields share their
-rows, so they go out as one record batch. Records are scanned with comprehensions, not a loop
-that looks at each one. Live, the session flushes at its ticks when a flush is due, and a timer
-thread flushes when a long batch keeps the session busy past that; the Arrow columns are built and
-sent outside the buffers' lock, so the session goes on decoding meanwhile.
+rows, so they go out as one record batch. Records are read as columns; the few the logs show
+(problems, commands) are gathered per bus and gripper by ``rerun_logs.log_rows``, which the
+native core does for its batches without making a Record per record. Live, the session flushes
+at its ticks when a flush is due, and a timer thread flushes when a long batch keeps the session
+busy past that; the Arrow columns are built and sent outside the buffers' lock, so the session
+goes on decoding meanwhile.
 """
 
 from __future__ import annotations
@@ -27,26 +29,21 @@ import math
 import threading
 import time
 from array import array
-from bisect import bisect_left
 from collections.abc import Sequence
-from itertools import compress, groupby, repeat
-from operator import eq
+from itertools import groupby
 from typing import Any, Final
 
 import numpy as np
 import pyarrow as pa
 
-from decoders.eg2_can import OP_READ
-from decoders.eg2_serial import Cmd
-from decoders.flags import DEVICE_FAULT, ESTIMATED_TIME, FOREIGN, UNANSWERED
-from decoders.modbus_pdu import READ_HOLDING
-from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
+from decoders.model import Record
 
 from .. import rerun_entities as ent
-from ..batches import column, problem_indexes, sample_series
+from ..batches import column, sample_series
 from ..listener import Listener
 from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
 from ..rerun_blueprint import Layout, blueprint
+from ..rerun_logs import log_rows
 from ..rerun_target import RerunOutput, RerunTarget, parse_target
 from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
 
@@ -56,36 +53,17 @@ NAN: Final = float("nan")  # no timestamp
 LIVE_FLUSH_S: Final = 0.08
 CAPTURE_FLUSH_S: Final = 2.0  # a capture read at full speed: few, large chunks
 LAYOUT_EVERY_S: Final = 1.0  # the blueprint is sent again at most this often
-MAX_ROWS: Final = 250_000  # records and samples waiting before a flush, whatever the time
+# records and samples waiting before a flush, whatever the time: what waits (with its Arrow
+# copies and Rerun's) is most of a capture's peak memory; flushing more often costs no more CPU
+MAX_ROWS: Final = 40_000
 
 SCALAR: Final = "scalar"
 LANE: Final = "lane"
 TEXT: Final = "text"
 
-# requests that only read (polls), by (protocol, code): the readings are plotted, the polls
-# are not listed as commands
-_POLLS: Final = frozenset(
-    {(EG2_SERIAL, c.value) for c in Cmd if c.name.startswith("READ_")}
-    | {(MODBUS_RTU, READ_HOLDING), (EG2_CAN, OP_READ)}
-)
-# flags that say nothing is wrong: not logged as problems
-_QUIET_FLAGS: Final = frozenset({FOREIGN, ESTIMATED_TIME})
 _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ERROR"}
 # the state fields plotted, in the order their entities are sent
 _PLOTTED: Final = (*(s.field for s in ent.SERIES), *ent.LANES)
-
-
-def _shown(records: Sequence[Record]) -> list[int]:
-    """The indexes of the records the logs show, in order: those with problems, and the
-    controller's commands (requests that are not polls)."""
-    shown = problem_indexes(records)
-    directions = column(records, "direction")
-    asks = list(compress(range(len(directions)), map(eq, directions, repeat(REQUEST))))
-    if asks:
-        protocols, codes = column(records, "protocol"), column(records, "code")
-        shown += [i for i in asks if (protocols[i], codes[i]) not in _POLLS]
-        shown = sorted(set(shown))
-    return shown
 
 
 def _runs(buses: list[str]) -> list[tuple[str, int, int]]:
@@ -134,6 +112,14 @@ class _Columns(_Entity):
         self.values.append(value)
         if self.kind == TEXT:
             self.levels.append(level)
+
+    def extend(self, t: list[float], seq: list[int], values: list[Any], levels: list[str]) -> None:
+        """Rows of a text log (``t`` NaN: no timestamp)."""
+        self.t.fromlist(t)
+        if self.seq is not None:
+            self.seq.fromlist(seq)
+        self.values += values
+        self.levels += levels
 
     def take(self) -> tuple[np.ndarray, np.ndarray | None, Any, list[str]]:
         """The rows so far (t, seq, values, levels), copied; the columns start empty."""
@@ -438,7 +424,6 @@ class RerunListener(Listener):
             latencies = np.array(column(records, "latency_ms"), dtype=np.float64)
             seqs = np.array(column(records, "seq"), dtype=np.int64)
             self._extend_span(stamps, seqs)
-            shown = _shown(records)
             for name, lo, hi in _runs(column(records, "bus")):
                 bus = self.buses.get(name) or self._bus(name)
                 part = times[lo:hi]
@@ -447,12 +432,6 @@ class RerunListener(Listener):
                 if part:
                     bus.times.fromlist(part)
                     bus.last_t = max(bus.last_t, max(part))
-                for i in shown[bisect_left(shown, lo) : bisect_left(shown, hi)]:
-                    rec = records[i]
-                    if rec.errors or rec.warnings:
-                        self._problem(bus, rec)
-                    else:
-                        self._command(rec, "INFO")
                 # a latency needs both times: never NaN
                 timed = ~(np.isnan(latencies[lo:hi]) | np.isnan(stamps[lo:hi]))
                 if timed.any():
@@ -460,7 +439,25 @@ class RerunListener(Listener):
                     latency.t.frombytes(stamps[lo:hi][timed].tobytes())
                     latency.seq.frombytes(seqs[lo:hi][timed].tobytes())  # type: ignore[union-attr]
                     latency.values.frombytes(latencies[lo:hi][timed].tobytes())
+            self._logs(records)
             self._pending += len(records)
+
+    def _logs(self, records: Sequence[Record]) -> None:
+        """The records the logs show: problems in their bus's error log and health counts,
+        commands and fault marks under their gripper (``rerun_logs.log_rows``: columns, not
+        one object per record, on the native path)."""
+        buses, grippers = log_rows(records)
+        for name, (t, seq, text, level, nonframes, problems, unanswered) in buses.items():
+            bus = self.buses[name]  # made for the records' runs
+            bus.errors.extend(t, seq, text, level)
+            bus.nonframes.fromlist(nonframes)
+            bus.problems.fromlist(problems)
+            bus.unanswered.fromlist(unanswered)
+        for key, (t, seq, text, level, mark_t, mark_seq) in grippers.items():
+            g = self.grippers.get(key) or self._gripper(*key)
+            g.commands.extend(t, seq, text, level)
+            g.mark_t += mark_t
+            g.mark_seq += mark_seq
 
     def _extend_span(self, stamps: np.ndarray, seqs: np.ndarray) -> None:
         """The first and last record on each timeline so far (the plots of a capture span
@@ -472,33 +469,6 @@ class RerunListener(Listener):
         if len(timed):
             first_t, last_t = self._time_span
             self._time_span = (min(first_t, float(timed.min())), max(last_t, float(timed.max())))
-
-    def _problem(self, bus: _Bus, rec: Record) -> None:
-        """A record with errors or warnings: the error log, a fault mark, the health counts."""
-        t = rec.t
-        quiet = bool(rec.flags) and _QUIET_FLAGS.issuperset(rec.flags)  # nothing wrong
-        if rec.errors:
-            bus.errors.add(t, rec.seq, _problem_text(rec), "ERROR")
-        elif not quiet:
-            bus.errors.add(t, rec.seq, _problem_text(rec), "WARN")
-        if t is not None:
-            if rec.kind != FRAME:
-                bus.nonframes.append(t)
-            if rec.errors:
-                bus.problems.append(t)
-            if UNANSWERED in rec.flags:
-                bus.unanswered.append(t)
-        if rec.device is not None and (rec.errors or DEVICE_FAULT in rec.flags):
-            g = self._gripper_of(rec)
-            g.mark_t.append(t)
-            g.mark_seq.append(rec.seq)
-        elif rec.direction == REQUEST and (rec.protocol, rec.code) not in _POLLS:
-            self._command(rec, "INFO" if quiet else "WARN")
-
-    def _command(self, rec: Record, level: str) -> None:
-        """A command of the controller (not a poll), in words, in its gripper's log."""
-        if rec.device is not None and rec.kind == FRAME:
-            self._gripper_of(rec).commands.add(rec.t, rec.seq, rec.summary or rec.name, level)
 
     def on_event(self, event: SourceEvent) -> None:
         """Warnings and errors of a live source (a port lost, drops) in the bus's error log.
@@ -800,9 +770,3 @@ def _lane_values(values: Any) -> list[str]:
             return list(map(str, whole.tolist()))
         values = values.tolist()
     return list(map(str, values))
-
-
-def _problem_text(rec: Record) -> str:
-    who = f"ID {rec.device} " if rec.device is not None else ""
-    what = rec.summary or rec.name or rec.kind
-    return f"{who}{what}: {'; '.join([*rec.errors, *rec.warnings])}"

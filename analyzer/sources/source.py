@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import SourceError
 from ..model import WARNING, Item, SourceEvent
@@ -52,6 +52,10 @@ class Source:
 
     def stop(self) -> Batch:
         return []
+
+    def read_natively(self) -> None:
+        """The session decodes with the native core and no listener wants the raw items: a
+        source that can hand it native frame batches (no Python object per frame) does."""
 
     @property
     def errors(self) -> list[str]:
@@ -174,12 +178,24 @@ class CaptureSource(Source):
         self.speed = speed
         self.positional = reader.single_stream
         self.kind = reader.kind
+        self.frames: Any = None  # the native core's reader of the frames (read_natively)
 
     @property
     def errors(self) -> list[str]:
         return self.reader.errors
 
+    def read_natively(self) -> None:
+        """A candump log read at full speed is read by the native core, as ``decode`` reads
+        it (analyzer/native.py ``candump_frames``): the same frames, bus names and errors."""
+        from ..native import candump_frames
+
+        if self.speed is None and self.frames is None:
+            self.frames = candump_frames(self.reader)
+
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
+        if self.frames is not None:
+            yield from self._native_batches(stop)
+            return
         if self.speed is not None:  # paced: each item as it falls due (a stop wakes it)
 
             def nap(seconds: float) -> None:
@@ -203,3 +219,15 @@ class CaptureSource(Source):
                     return
         if batch:
             yield batch
+
+    def _native_batches(self, stop: threading.Event) -> Iterator[Any]:
+        """Native frame batches (``FrameBatch``: CAN frames only, no events among them); the
+        reader's position and, at the end, its errors, as the Python reader keeps them."""
+        frames, reader = self.frames, self.reader
+        while (batch := frames.read(CAPTURE_BATCH_ITEMS)) is not None:
+            reader.position = frames.position
+            yield batch
+            if stop.is_set():
+                return
+        reader.position = reader.size
+        reader.errors += frames.errors

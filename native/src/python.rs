@@ -23,8 +23,12 @@ use std::path::PathBuf;
 
 #[path = "python_arrow.rs"]
 mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output (helper N)
+#[path = "python_frames.rs"]
+mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the native session
 #[path = "python_live.rs"]
 mod python_live; // LiveCan, RecordBatch, can_raw_messages: the live CAN path (helper L)
+#[path = "python_rerun.rs"]
+mod python_rerun; // rerun_log_rows: what a plot's logs show of a RecordBatch
 #[path = "python_tracker.rs"]
 mod python_tracker; // Tracker, SampleBatch: the live state tracker (helper K)
 
@@ -390,8 +394,10 @@ impl PyDecodeRun {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyDecodeRun>()?;
     python_arrow::register(m)?;
+    python_frames::register(m)?;
     python_live::register(m)?;
     python_tracker::register(m)?;
+    python_rerun::register(m)?;
     m.add("Unsupported", m.py().get_type::<Unsupported>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("FORMATS", ("jsonl", "csv", "text"))?;

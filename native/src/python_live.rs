@@ -18,6 +18,7 @@
 //!
 //! A child module of python.rs (helper K's tracker, a sibling, reads `RecordBatch::records`).
 
+use super::python_frames::FrameBatch;
 use crate::hash::FastMap;
 use crate::live::LiveCan as Core;
 use crate::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
@@ -780,6 +781,27 @@ struct PyLiveCan {
 }
 
 impl PyLiveCan {
+    /// `feed` of frames read natively (python_frames.rs): no Python object to read.
+    fn feed_frames(&mut self, py: Python<'_>, batch: &FrameBatch) -> RecordBatch {
+        let core = &mut self.core;
+        let mut out = Vec::with_capacity(batch.frames.len() + 8);
+        py.allow_threads(|| {
+            let mut last: Option<(&Arc<str>, usize)> = None;
+            for (bus, frame) in &batch.frames {
+                let id = match last {
+                    Some((name, id)) if Arc::ptr_eq(name, bus) => id,
+                    _ => {
+                        let id = core.bus_id(bus);
+                        last = Some((bus, id));
+                        id
+                    }
+                };
+                core.feed(id, frame, &mut out);
+            }
+        });
+        RecordBatch::from_records(out)
+    }
+
     fn bus_id(&mut self, bus: &Bound<'_, PyString>) -> PyResult<usize> {
         let py = bus.py();
         if let Some((_, id)) = self.buses.iter().find(|(b, _)| b.bind(py).is(bus)) {
@@ -834,6 +856,9 @@ impl PyLiveCan {
     /// concatenated. Every item is read before any is decoded: an item that is not a CAN
     /// frame raises TypeError with nothing decoded.
     fn feed(&mut self, py: Python<'_>, items: &Bound<'_, PyAny>) -> PyResult<RecordBatch> {
+        if let Ok(batch) = items.downcast::<FrameBatch>() {
+            return Ok(self.feed_frames(py, batch.get()));
+        }
         self.queue.clear();
         self.bytes.clear();
         let mut bytes = std::mem::take(&mut self.bytes);

@@ -346,6 +346,7 @@ impl GzipBytesReader {
                 Ok(None)
             }
             Err(Stop::Caught(c)) => {
+                // the caller names the file (as the Python reader leaves it to the caller)
                 self.errors.push(format!(
                     "compressed data damaged or cut short after {} bytes ({}: {}); the rest \
                      is lost",

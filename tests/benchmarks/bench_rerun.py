@@ -1,7 +1,7 @@
 """Rerun output under load (issues 9 and 17): a capture turned into an .rrd against decoding it
 to JSONL, memory for a large capture, and a live session at 20,000 records/s.
 
-    python tests/benchmarks/bench_rerun.py [--frames 200000] [--memory-frames 1000000]
+    python tests/benchmarks/bench_rerun.py [--frames 200000 1000000] [--memory-frames 1000000]
                                            [--runs 3] [--live-rate 20000] [--live-duration 60]
                                            [--only capture|warnings|memory|live]
 
@@ -12,9 +12,11 @@ Each is decoded with ``eg2scope decode FILE --format jsonl`` and plotted with ``
 FILE --save out.rrd`` in child processes, side by side, after one warm-up run (so Python's
 bytecode caches are written, as they are for a user); CPU (user + system, all threads, from the
 child's rusage), wall time and peak RSS, median of ``--runs``. Also shown: a session with no
-output (the plot's decoding and state samples) and importing rerun. Targets: plot CPU at most
-2x decode --format jsonl on the warning-heavy capture; peak RSS of plot under 300 MB at 1M
-records of it (``memory``: one run of ``--memory-frames``).
+output (the plot's decoding and state samples), importing rerun, and Rerun's own cost of the
+plot's output (its .rrd's chunks sent and written again by a script that does only that), the
+floor no eg2scope code can go under. Each size of ``--frames`` is measured (default 200k and 1M
+frames). Targets: plot CPU at most 2x decode --format jsonl on the warning-heavy capture; peak
+RSS of plot under 300 MB at 1M records of it (``memory``: one run of ``--memory-frames``).
 
 Live: python-can's virtual bus does not cross processes, so a flooder thread sends request and
 response frames at ``--live-rate`` records/s while a live session (the real CanTap, the Rerun
@@ -43,14 +45,10 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 
-from bench_record import flood_can  # noqa: E402
 from traffic import can_frames, warning_can_frames  # noqa: E402
 
-from analyzer.listener import Listener  # noqa: E402
-from analyzer.session import live_session  # noqa: E402
-from analyzer.sinks.rerun import RerunListener  # noqa: E402
-from analyzer.sources.can_tap import CanTap  # noqa: E402
-from analyzer.sources.live import wait_open  # noqa: E402
+# (the live benchmark's modules are imported by it: a child's peak RSS starts at this
+# process's, which importing rerun here would raise by 200 MB)
 
 MAX_RATIO = 2.0  # plot --save / decode --format jsonl, CPU
 MAX_RSS_MB = 300
@@ -68,6 +66,24 @@ class Null(Listener):
 run_capture(CaptureOptions(sys.argv[1], progress=False), [Null()])
 """
 IMPORT_RERUN = "import rerun, rerun.blueprint"
+# Rerun's own cost of the plot's output: the chunks of its .rrd sent again to a new file, no
+# eg2scope code involved (prints the CPU, all threads, of sending, encoding and writing them)
+ENCODE_ONLY = """
+import resource, sys
+import rerun as rr
+from rerun.chunk import RrdReader
+chunks = list(RrdReader(sys.argv[1]).stream())
+def cpu():
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+stream = rr.RecordingStream("eg2scope-bench")
+stream.save(sys.argv[2])
+start = cpu()
+stream.send_chunks(chunks)
+stream.flush()
+stream.disconnect()
+print(cpu() - start)
+"""
 
 
 def write_candump(path: Path, frames: Any) -> None:
@@ -95,6 +111,15 @@ def run_child(cmd: list[str]) -> tuple[float, float, float]:
 
 
 EG2SCOPE = [sys.executable, "-m", "analyzer"]
+
+
+def encoding_cpu(rrd: Path, tmp: Path) -> float:
+    """CPU seconds Rerun takes to send, encode and write the chunks of ``rrd`` again."""
+    out = subprocess.run(
+        [sys.executable, "-c", ENCODE_ONLY, str(rrd), str(tmp / "again.rrd")],
+        capture_output=True, text=True, check=True, cwd=ROOT, env=CHILD_ENV,
+    )  # fmt: skip
+    return float(out.stdout)
 
 
 def bench_capture(what: str, frames: int, runs: int, tmp: Path) -> bool:
@@ -130,6 +155,11 @@ def bench_capture(what: str, frames: int, runs: int, tmp: Path) -> bool:
     verdict = "ok" if ok else "MISSED"
     print(f"  plot / decode jsonl: CPU x{ratio_cpu:.2f}, wall x{ratio_wall:.2f} "
           f"(target <= x{MAX_RATIO}); .rrd {size:.0f} MB -> {verdict}")  # fmt: skip
+    encode = statistics.median(encoding_cpu(tmp / "out.rrd", tmp) for _ in range(runs))
+    floor = results["import rerun"][0] + encode
+    print(f"  Rerun alone: its .rrd's chunks sent and written again CPU {encode:.2f} s; with "
+          f"import rerun {floor:.2f} s = x{floor / base[0]:.2f} decode jsonl before any "
+          "reading or decoding")  # fmt: skip
     return ok or what == "capture"  # the target is the warning-heavy capture's
 
 
@@ -145,21 +175,29 @@ def bench_memory(frames: int, tmp: Path) -> bool:
     return ok
 
 
-class NullStates(Listener):
-    """Decoding and state samples, no output: the live baseline."""
-
-    wants_states = True
-
-    def on_records(self, records: list[Any]) -> None:
-        pass
-
-    def flush(self, final: bool = False) -> None:
-        pass
-
-
 def bench_live(rate: int, duration: float, tmp: Path, rerun: bool = True) -> bool:
     """``rate`` records/s: requests and responses, half each (``rate`` frames/s)."""
+    from bench_record import flood_can
+
+    from analyzer.session import live_session
+    from analyzer.sinks.rerun import RerunListener
+    from analyzer.sources.can_tap import CanTap
+    from analyzer.sources.live import wait_open
+
     channel = f"bench-rerun-{os.getpid()}-{time.monotonic_ns()}"
+    from analyzer.listener import Listener
+
+    class NullStates(Listener):
+        """Decoding and state samples, no output: the live baseline."""
+
+        wants_states = True
+
+        def on_records(self, records: list[Any]) -> None:
+            pass
+
+        def flush(self, final: bool = False) -> None:
+            pass
+
     listener: Any = RerunListener(str(tmp / "live.rrd"), live=True) if rerun else NullStates()
     flushes: list[float] = []
     flush = listener.flush
@@ -209,7 +247,7 @@ def bench_live(rate: int, duration: float, tmp: Path, rerun: bool = True) -> boo
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--frames", type=int, default=200_000)
+    ap.add_argument("--frames", type=int, nargs="+", default=[200_000, 1_000_000])
     ap.add_argument("--memory-frames", type=int, default=1_000_000)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--live-rate", type=int, default=20_000)
@@ -219,8 +257,8 @@ def main() -> int:
     ok = True
     with tempfile.TemporaryDirectory() as tmp:
         for what in ("capture", "warnings"):
-            if args.only in (None, what):
-                ok &= bench_capture(what, args.frames, args.runs, Path(tmp))
+            for frames in args.frames if args.only in (None, what) else ():
+                ok &= bench_capture(what, frames, args.runs, Path(tmp))
         if args.only in (None, "memory"):
             ok &= bench_memory(args.memory_frames, Path(tmp))
         if args.only in (None, "live"):
