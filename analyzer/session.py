@@ -41,6 +41,7 @@ from .listener import Listener
 from .model import ERROR, SourceEvent
 from .sources.live import CLOSED, LOST, Tap
 from .sources.source import Batch, LiveSource, Source
+from .tui.timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,11 @@ class Session:
         self._finishing = False  # in _finish: signals are ignored, the recording must end
         self._cut_short = True  # the source did not run to its end (set when it did)
         self._named = 0  # the source's bus protocols handed to the decoding
+        # records of several buses in capture-time order (a byte stream's frames are finished
+        # after CAN frames captured meanwhile); CAN input and one stream come in time order
+        self._order: TimeMerge | None = None
+        if source.kind != "can" and not source.positional:
+            self._order = TimeMerge(LIVE_HOLD_S if source.live else CAPTURE_HOLD_S)
 
     # -- running ---------------------------------------------------------------------------
 
@@ -185,7 +191,7 @@ class Session:
                 elif x.kind == CLOSED:
                     records += decoding.cut_off(x.bus)
                 # keep events in order with the data around them
-                self._emit(items, records)
+                self._emit(items, records, flush=True)
                 items = []
                 self._event(x)
             else:
@@ -196,14 +202,20 @@ class Session:
             records += decoding.stop() if self._cut_short else decoding.finish()
         elif self.source.live:
             records += decoding.tick(now)
-        self._emit(items, records)
+        self._emit(items, records, flush=final)
         for listener in tuple(self.listeners):  # a detach must not skip the next one
             try:
                 listener.tick(now)
             except Exception as exc:
                 self._detach(listener, exc)
 
-    def _emit(self, items: list[Any], records: Sequence[Record]) -> None:
+    def _emit(self, items: list[Any], records: Sequence[Record], flush: bool = False) -> None:
+        order = self._order
+        if order is not None:
+            order.hear(items)
+            records = list(order.push(records, time.time() if self.source.live else None))
+            if flush:
+                records += order.flush()
         counts = self.counts
         if items:
             counts.items += len(items)

@@ -179,6 +179,11 @@ class CaptureSource(Source):
     def errors(self) -> list[str]:
         return self.reader.errors
 
+    @property
+    def protocols(self) -> dict[str, str]:
+        """The protocols the capture says its byte buses speak (a recording's)."""
+        return self.reader.protocols
+
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
         if self.speed is not None:  # paced: each item as it falls due (a stop wakes it)
 
