@@ -69,7 +69,9 @@ def add_subparser(sub: Any) -> None:
         "write <capture>.rrd here when there is no display)"
     )
     where = target.add_mutually_exclusive_group()
-    where.add_argument("--save", metavar="FILE.rrd", help="write a Rerun recording file")
+    where.add_argument(
+        "--save", metavar="FILE.rrd", help="write a Rerun recording file (replaced if there)"
+    )
     where.add_argument("--spawn", action="store_true", help="spawn the Rerun viewer")
     where.add_argument(
         "--connect",
