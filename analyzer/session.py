@@ -191,9 +191,8 @@ class Session:
                 elif x.kind == CLOSED:
                     records += decoding.cut_off(x.bus)
                 # keep events in order with the data around them
-                self._emit(items, records, flush=True)
+                self._emit(items, records, x)
                 items = []
-                self._event(x)
             else:
                 items.append(x)
         records = decoding.feed_items(items)
@@ -209,13 +208,37 @@ class Session:
             except Exception as exc:
                 self._detach(listener, exc)
 
-    def _emit(self, items: list[Any], records: Sequence[Record], flush: bool = False) -> None:
+    def _emit(
+        self,
+        items: list[Any],
+        records: Sequence[Record],
+        event: SourceEvent | None = None,
+        flush: bool = False,
+    ) -> None:
+        """The raw input, then the records and the event (if any) in capture-time order."""
         order = self._order
-        if order is not None:
-            order.hear(items)
-            records = list(order.push(records, time.time() if self.source.live else None))
-            if flush:
-                records += order.flush()
+        if order is None:
+            self._deliver(items, records)
+            if event is not None:
+                self._event(event)
+            return
+        order.hear(items)
+        held: list[Any] = [*records, event] if event is not None else list(records)
+        out = list(order.push(held, time.time() if self.source.live else None))
+        if flush:
+            out += order.flush()
+        self._deliver(items, [])
+        run: list[Record] = []
+        for x in out:  # runs of records, and the events between them
+            if type(x) is SourceEvent:
+                self._deliver([], run)
+                run = []
+                self._event(x)
+            else:
+                run.append(x)
+        self._deliver([], run)
+
+    def _deliver(self, items: list[Any], records: Sequence[Record]) -> None:
         counts = self.counts
         if items:
             counts.items += len(items)

@@ -47,12 +47,16 @@ def test_decode_on_each_engine(kind: str, engine: str, decodes, reference) -> No
 
 
 def backwards_steps(lines: list[dict]) -> list[tuple[int, float]]:
-    """Where the time column runs backwards: (line, by how many seconds)."""
-    out, last = [], None
+    """Where the time column runs backwards across buses: (line, by how many seconds). Each
+    bus keeps its stream order, so a line is placed at the latest time its bus has reached
+    (a bus's own frames finished at the stop, after its ``closed`` event, stay after it)."""
+    out: list[tuple[int, float]] = []
+    reached: dict[str, float] = {}
+    last = None
     for i, line in enumerate(lines):
-        t = line["t"]
-        if t is None:
+        if line["t"] is None:
             continue
+        t = reached[line["bus"]] = max(line["t"], reached.get(line["bus"], line["t"]))
         if last is not None and t < last:
             out.append((i, last - t))
         last = t if last is None else max(last, t)
