@@ -45,6 +45,24 @@ class OutputError(OSError):
     """Writing an output failed; the message names the file."""
 
 
+def check_new_file(path: str | os.PathLike[str], force: bool) -> None:
+    """Before a command makes ``path`` (a recording: the user's data, not derived from an
+    input): UsageError if a file is there already, unless ``force``; OutputError, in words,
+    if its folder is missing or not writable."""
+    target = Path(path)
+    if target.is_dir():
+        raise UsageError(f"the output {os.fspath(path)} is a directory")
+    if target.exists() and not force:
+        raise UsageError(
+            f"{os.fspath(path)} already exists: give --force to replace it, or another name"
+        )
+    folder = target.parent
+    if not folder.is_dir():
+        raise OutputError(f"cannot write {os.fspath(path)}: there is no folder {folder}")
+    if not os.access(folder, os.W_OK):
+        raise OutputError(f"cannot write {os.fspath(path)}: the folder {folder} is not writable")
+
+
 @contextlib.contextmanager
 def output_stream(
     path: str | None, binary: bool, inputs: Iterable[str | os.PathLike[str]] = ()

@@ -84,7 +84,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk, get_chunk_data_strea
 from mcap.summary import Summary
 from mcap.writer import LIBRARY_IDENTIFIER
 
-from decoders.model import CanFrame, Record
+from decoders.model import EG2_SERIAL, MODBUS_RTU, CanFrame, Record
 from decoders.model import Chunk as ByteChunk
 
 from . import __version__
@@ -103,6 +103,7 @@ from .listener import Listener
 from .mcap_writer import MAGIC, McapWriter
 from .model import ERROR, WARNING, Item, SourceEvent, StateSample, json_default
 from .sources.capture import CaptureReader
+from .sources.naming import BUS_BY_PROTOCOL
 
 # -- layout ----------------------------------------------------------------------------------------
 
@@ -602,6 +603,7 @@ class McapRecorder(Closing, Listener):
 
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, summary offsets start, CRC
 _KIND_OF_SCHEMA = {CAN_FRAME: "can", RAW_CHUNK: "bytes"}
+_PROTOCOL_OF_BUS = {bus: protocol for protocol, bus in BUS_BY_PROTOCOL.items()}
 
 
 def open_recording(path: str | os.PathLike[str]) -> IO[bytes]:
@@ -628,6 +630,8 @@ class _Recording:
         self.summary: Summary | None = None
         self.metadata: dict[str, Any] = {}
         self.raw_kinds: set[str] = set()
+        self.raw_buses: set[str] = set()
+        self.byte_buses: set[str] = set()  # buses whose raw input is byte chunks
         head = f.read(len(MAGIC))
         if size == 0:
             self.problem = "the recording is empty"
@@ -682,7 +686,7 @@ class _Recording:
         for ch in summary.channels.values():
             schema = summary.schemas.get(ch.schema_id)
             if ch.topic.startswith(RAW) and schema is not None:
-                self.raw_kinds.add(_KIND_OF_SCHEMA.get(schema.name, "bytes"))
+                self._raw(_bus_of(ch), _KIND_OF_SCHEMA.get(schema.name, "bytes"))
         try:
             self.f.seek(0)
             for meta in make_reader(self.f).iter_metadata():
@@ -707,10 +711,48 @@ class _Recording:
                             schemas[rec.id] = rec.name
                         elif isinstance(rec, Channel) and rec.topic.startswith(RAW):
                             kind = _KIND_OF_SCHEMA.get(schemas.get(rec.schema_id, ""), "bytes")
-                            self.raw_kinds.add(kind)
+                            self._raw(_bus_of(rec), kind)
                     return
         except Exception:
             pass  # the damage is reported when the messages are read
+
+    def _raw(self, bus: str, kind: str) -> None:
+        self.raw_kinds.add(kind)
+        self.raw_buses.add(bus)
+        if kind == "bytes":
+            self.byte_buses.add(bus)
+
+    def protocols(self) -> dict[str, str]:
+        """The protocol each byte bus was decoded with when it was recorded (bus -> protocol):
+        its first decoded frame says it (a finished file), else its name does (``rs232``,
+        ``rs485``); a bus that says neither is left to detection."""
+        out = {bus: by_name for bus in self.byte_buses if (by_name := _PROTOCOL_OF_BUS.get(bus))}
+        summary = self.summary
+        if summary is None:
+            return out
+        channels = {
+            ch.id: _bus_of(ch)
+            for ch in summary.channels.values()
+            if ch.topic.startswith(DECODED) and _bus_of(ch) in self.byte_buses
+        }
+        for ci in sorted(summary.chunk_indexes, key=lambda c: c.message_start_time):
+            if not channels:
+                break
+            if channels.keys().isdisjoint(ci.message_index_offsets):
+                continue
+            try:
+                records = self.chunk_at(ci)
+            except Exception:
+                continue  # reported when the messages are read
+            for rec in records:
+                bus = channels.get(rec.channel_id) if isinstance(rec, Message) else None
+                if bus is None:
+                    continue
+                protocol = orjson.loads(rec.data).get("protocol")
+                if protocol in (EG2_SERIAL, MODBUS_RTU):
+                    out[bus] = protocol
+                    del channels[rec.channel_id]
+        return out
 
     def chunk_at(self, ci: ChunkIndex) -> list[Any]:
         """The records of the chunk the index entry names, checked byte for byte against the
@@ -1187,6 +1229,15 @@ class McapCaptureReader(CaptureReader):
         kinds = self._recording.raw_kinds
         self.kind = "mixed" if len(kinds) > 1 else next(iter(kinds), "bytes")
         self.damaged = not self._recording.intact
+        buses = self._recording.raw_buses
+        if bus is not None and len(buses) > 1:
+            self._file.close()
+            raise UsageError(
+                f"{self.path} is a recording of {len(buses)} buses ({', '.join(sorted(buses))}): "
+                "--bus would give them one name; leave it out"
+            )
+        protocols = self._recording.protocols()
+        self.protocols = {bus or name: protocol for name, protocol in protocols.items()}
 
     def _progress(self, position: int) -> None:
         self.position = min(position, self.size)

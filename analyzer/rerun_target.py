@@ -183,9 +183,12 @@ class RerunOutput:
         self.web_url: str | None = None
         self.attached = False
         self._finished = False
+        self._discarded = False
 
     def show(self, blueprint: Any) -> None:
         """Attach to the target with ``blueprint`` as the default, or send it as the new one."""
+        if self._discarded:
+            return
         if self.attached:
             self.stream.send_blueprint(blueprint, make_active=True, make_default=True)
         else:
@@ -238,6 +241,15 @@ class RerunOutput:
                 f"rerun {self.target.where}",
                 file=self.out,
             )
+
+    def discard(self) -> None:
+        """Nothing could be read: no file (the empty one the check made, or one begun, is
+        removed), and nothing more sent anywhere."""
+        self._finished = self._discarded = True
+        if self.attached:
+            self.stream.disconnect()
+        if self.target.kind == SAVE and self.target.where:
+            Path(self.target.where).unlink(missing_ok=True)
 
     def hold(self) -> None:
         """Serve the web viewer until Ctrl-C, SIGTERM or SIGHUP (a capture is sent at once;

@@ -41,6 +41,7 @@ from .listener import Listener
 from .model import ERROR, SourceEvent
 from .sources.live import CLOSED, LOST, Tap
 from .sources.source import Batch, LiveSource, Source
+from .tui.timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,11 @@ class Session:
         self._finishing = False  # in _finish: signals are ignored, the recording must end
         self._cut_short = True  # the source did not run to its end (set when it did)
         self._named = 0  # the source's bus protocols handed to the decoding
+        # records of several buses in capture-time order (a byte stream's frames are finished
+        # after CAN frames captured meanwhile); CAN input and one stream come in time order
+        self._order: TimeMerge | None = None
+        if source.kind != "can" and not source.positional:
+            self._order = TimeMerge(LIVE_HOLD_S if source.live else CAPTURE_HOLD_S)
 
     # -- running ---------------------------------------------------------------------------
 
@@ -191,9 +197,8 @@ class Session:
                 elif x.kind == CLOSED:
                     records += decoding.cut_off(x.bus)
                 # keep events in order with the data around them
-                self._emit(items, records)
+                self._emit(items, records, x)
                 items = []
-                self._event(x)
             else:
                 items.append(x)
         records = decoding.feed_items(items)
@@ -202,14 +207,44 @@ class Session:
             records += decoding.stop() if self._cut_short else decoding.finish()
         elif self.source.live:
             records += decoding.tick(now)
-        self._emit(items, records)
+        self._emit(items, records, flush=final)
         for listener in tuple(self.listeners):  # a detach must not skip the next one
             try:
                 listener.tick(now)
             except Exception as exc:
                 self._detach(listener, exc)
 
-    def _emit(self, items: list[Any], records: Sequence[Record]) -> None:
+    def _emit(
+        self,
+        items: list[Any],
+        records: Sequence[Record],
+        event: SourceEvent | None = None,
+        flush: bool = False,
+    ) -> None:
+        """The raw input, then the records and the event (if any) in capture-time order."""
+        order = self._order
+        if order is None:
+            self._deliver(items, records)
+            if event is not None:
+                self._event(event)
+            return
+        order.hear(items)
+        held: list[Any] = [*records, event] if event is not None else list(records)
+        out = list(order.push(held, time.time() if self.source.live else None))
+        if flush:
+            out += order.flush()
+        self._deliver(items, [])
+        run: list[Record] = []
+        for x in out:  # runs of records, and the events between them
+            if type(x) is SourceEvent:
+                self._deliver([], run)
+                run = []
+                self._event(x)
+            else:
+                run.append(x)
+        self._deliver([], run)
+
+    def _deliver(self, items: list[Any], records: Sequence[Record]) -> None:
         counts = self.counts
         if items:
             counts.items += len(items)

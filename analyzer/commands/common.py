@@ -173,6 +173,14 @@ class CaptureOptions:
 def open_reader(opts: CaptureOptions) -> CaptureReader:
     """The capture's reader; a usage error when the protocol option cannot apply to it."""
     reader = open_capture(opts.path, bus=opts.bus)
+    if opts.protocol in (EG2_SERIAL, MODBUS_RTU) and reader.protocols:
+        said = ", ".join(f"{bus}: {short_name(p)}" for bus, p in sorted(reader.protocols.items()))
+        reader.close()
+        raise UsageError(
+            f"{opts.path} says which protocol each of its serial buses speaks ({said}), and is "
+            f"decoded as it says: --protocol {short_name(opts.protocol)} is for raw dumps; "
+            "leave it out"
+        )
     if opts.protocol in (EG2_SERIAL, MODBUS_RTU) and reader.kind == "can":
         reader.close()
         raise UsageError(

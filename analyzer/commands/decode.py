@@ -68,7 +68,8 @@ def add_subparser(sub: Any) -> None:
         "-o",
         metavar="PATH",
         help="write to PATH instead of stdout (written under a temporary name and renamed "
-        "when done; never the input file)",
+        "when done, replacing a PATH that is there, as a compiler replaces its output; never "
+        "the input file)",
     )
     parser.add_argument(
         "--jobs",

@@ -7,12 +7,11 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from ..listener import Listener
 from ..session import Session
 from ..sim.rig import BUSES, DemoRig
 from .common import probability
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
-from .session import add_session_arguments, run_session
+from .session import Extra, add_session_arguments, check_recording_output, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -73,11 +72,12 @@ def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
 def run_demo(
     args: argparse.Namespace,
     show: str | None,
-    extra: list[Listener] | None = None,
+    extra: Extra = None,
     on_done: Callable[[Session], None] | None = None,
 ) -> int:
     """The simulated grippers through one live session (``extra``: more listeners;
     ``on_done``: handed the finished session)."""
+    check_recording_output(args)  # before the banner and the rig
     with DemoRig(args.buses, noise=args.noise) as rig:
         print(
             f"eg2scope {args.command}: simulated grippers 1 and 2 on "

@@ -9,6 +9,7 @@ from typing import Any
 
 from ..batches import ENGINES, session_engine
 from ..errors import EXIT_INTERRUPTED, UsageError
+from ..listener import Listener
 from ..rerun_target import (
     SERVE_WEB,
     SPAWN,
@@ -18,6 +19,7 @@ from ..rerun_target import (
     save_target,
 )
 from ..session import Session
+from ..sources.capture import CaptureReader
 from .common import (
     CaptureOptions,
     finish_capture,
@@ -67,7 +69,9 @@ def add_subparser(sub: Any) -> None:
         "write <capture>.rrd here when there is no display)"
     )
     where = target.add_mutually_exclusive_group()
-    where.add_argument("--save", metavar="FILE.rrd", help="write a Rerun recording file")
+    where.add_argument(
+        "--save", metavar="FILE.rrd", help="write a Rerun recording file (replaced if there)"
+    )
     where.add_argument("--spawn", action="store_true", help="spawn the Rerun viewer")
     where.add_argument(
         "--connect",
@@ -175,7 +179,8 @@ def plot_capture(args: argparse.Namespace) -> int:
     except BaseException:
         reader.close()
         raise
-    session, reader = run_capture(opts, [listener], reader)
+    unread = UnreadCapture(reader, listener.output)  # closed first: it may discard the plot
+    session, reader = run_capture(opts, [unread, listener], reader)
     code = finish_capture(args.file, session, reader)
     for _, failure in session.detached:
         print(f"eg2scope: error: the Rerun output failed: {failure}", file=sys.stderr)
@@ -185,26 +190,59 @@ def plot_capture(args: argparse.Namespace) -> int:
     return code
 
 
+class UnreadCapture(Listener):
+    """A capture from which nothing at all could be read gets no plot (no .rrd file); a
+    damaged one that yielded anything keeps its plot."""
+
+    wants_raw = True
+
+    def __init__(self, reader: CaptureReader, output: Any) -> None:
+        self.reader = reader
+        self.output = output
+        self.items = 0
+
+    def on_raw(self, items: list[Any]) -> None:
+        self.items += len(items)
+
+    def on_records(self, records: Any) -> None:
+        pass
+
+    def close(self) -> None:
+        if self.reader.errors and not self.items:
+            self.output.discard()
+
+
 def plot_live(args: argparse.Namespace) -> int:
-    from ..sinks.rerun import RerunListener
 
     if args.demo:
         return _plot_demo(args)
     taps = open_taps(args)  # usage errors before a viewer opens
-    listener = RerunListener(chosen_target(args, args.output), live=True)
+    target = chosen_target(args, args.output)
+    made: list[Any] = []  # made once the taps are open: a source that fails makes no file
     ended: list[Session] = []
-    code = run_session(args, taps, show=None, extra=[listener], on_done=ended.append)
-    return _finish_live(listener, code, ended)
+    code = run_session(
+        args, taps, show=None, extra=lambda: made_listener(made, target), on_done=ended.append
+    )
+    return _finish_live(made[0], code, ended)
+
+
+def made_listener(made: list[Any], target: RerunTarget) -> list[Any]:
+    from ..sinks.rerun import RerunListener
+
+    made.append(RerunListener(target, live=True))
+    return made
 
 
 def _plot_demo(args: argparse.Namespace) -> int:
-    from ..sinks.rerun import RerunListener
     from .demo import run_demo
 
-    listener = RerunListener(chosen_target(args, args.output), live=True)
+    target = chosen_target(args, args.output)
+    made: list[Any] = []  # made once the rig runs: a refused -o makes no file
     ended: list[Session] = []
-    code = run_demo(args, show=None, extra=[listener], on_done=ended.append)
-    return _finish_live(listener, code, ended)
+    code = run_demo(
+        args, show=None, extra=lambda: made_listener(made, target), on_done=ended.append
+    )
+    return _finish_live(made[0], code, ended)
 
 
 def _finish_live(listener: Any, code: int, ended: list[Session]) -> int:

@@ -17,12 +17,16 @@ from .. import __version__
 from ..errors import UsageError
 from ..listener import Listener, make_listener
 from ..model import SourceEvent
+from ..outfile import check_new_file
 from ..session import Session, SessionOptions
 from ..sinks.text import format_event, use_colour
 from ..sources.live import Tap
 from ..sources.naming import BUS_BY_PROTOCOL
 from ..sources.source import LiveSource
 from .common import exit_code, positive_float, positive_int
+
+# a live command's own listeners: a list, or what makes them once the taps are open
+Extra = list[Listener] | Callable[[], list[Listener]] | None
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
@@ -34,7 +38,13 @@ def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool
         "-o",
         metavar="RUN.mcap",
         required=record_required,
-        help="record raw input, decoded records, device state and events to this MCAP file",
+        help="record raw input, decoded records, device state and events to this MCAP file "
+        "(an existing file is refused unless --force)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the -o file if it exists (without it, an existing file is a usage error)",
     )
     parser.add_argument(
         "--duration",
@@ -133,6 +143,14 @@ def check_recording_name(path: str) -> None:
         raise UsageError(f"recordings are MCAP files: name the output *.mcap, not {path}")
 
 
+def check_recording_output(args: argparse.Namespace) -> None:
+    """``-o``, before anything starts: an MCAP name, a folder that is there, and no file that
+    a recording would replace unless ``--force``."""
+    if args.output:
+        check_recording_name(args.output)
+        check_new_file(args.output, getattr(args, "force", False))
+
+
 def recorder(path: str, taps: list[Tap]) -> Listener:
     check_recording_name(path)
     return make_listener("mcap", path, metadata=metadata(taps))
@@ -155,21 +173,22 @@ def run_session(
     show: str | None = "text",
     per_bus: dict[str, str] | None = None,
     on_start: Callable[[], None] | None = None,
-    extra: list[Listener] | None = None,
+    extra: Extra = None,
     on_done: Callable[[Session], None] | None = None,
 ) -> int:
     """Watch ``taps`` with the outputs the options ask for: ``show`` "text" or "jsonl" on
     stdout (None: a status line and events on stderr), and an MCAP recording with ``-o``.
     The taps are opened first: a device that does not open fails the command before a file is
-    made. ``on_done`` is handed the finished session."""
+    made (``extra``: more listeners, or what makes them once the taps are open, so an output
+    file of theirs is never made for a source that fails). ``on_done`` is handed the finished
+    session."""
     from decoders.registry import resolve_protocol
 
     try:
         protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.output:
-        check_recording_name(args.output)
+    check_recording_output(args)
     options = SessionOptions(
         protocol=protocol,
         per_bus=per_bus or {},
@@ -201,9 +220,9 @@ def run_session(
 
 
 def _outputs(
-    args: argparse.Namespace, taps: list[Tap], show: str | None, extra: list[Listener] | None
+    args: argparse.Namespace, taps: list[Tap], show: str | None, extra: Extra
 ) -> list[Listener]:
-    listeners: list[Listener] = list(extra or [])
+    listeners: list[Listener] = list((extra() if callable(extra) else extra) or [])
     if show == "text":  # live: time counts from the session's start
         listeners.append(make_listener("text", sys.stdout, t0=time.time()))
     elif show is not None:

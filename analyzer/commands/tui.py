@@ -29,7 +29,7 @@ from .livesource import add_source_arguments, open_taps
 from .session import (
     add_session_arguments,
     byte_times,
-    check_recording_name,
+    check_recording_output,
     open_source,
     recorder,
 )
@@ -126,8 +126,7 @@ def live_plan(
 ) -> SessionPlan:
     from ..tui.app import SessionPlan
 
-    if args.output:
-        check_recording_name(args.output)
+    check_recording_output(args)
     # opened first: a device that does not open fails here (exit 1), before a recording is made
     source = open_source(taps, args.queue_size, on_start)
     try:

@@ -46,6 +46,8 @@ class TextFormat:
     last_line: str | None = None
     #: a last line without its line end that cannot be the start of a longer one
     complete: Callable[[str], bool] = lambda line: False
+    #: a line meant as a frame: one the reader skipped could not be parsed
+    frame_shaped: Callable[[str], bool] = lambda line: False
 
 
 _ASC_HEADER = re.compile(
@@ -55,7 +57,11 @@ _ASC_HEADER = re.compile(
 _ASC_STATE = re.compile(r"(date|base|(no\s+)?internal\s+events|begin\s+triggerblock)\b", re.I)
 _ASC_TIMESTAMP = re.compile(r"\d+\.\d+\s")
 # channel, identifier, direction: a frame, whether or not python-can could read it
-_ASC_FRAME_SHAPED = re.compile(r"\d+\.\d+\s+(\d+\s+\S+\s+(rx|tx)\b|canfd\s)", re.IGNORECASE)
+# (or a channel and a token that can only begin an identifier: a frame line cut or garbled)
+_ASC_FRAME_SHAPED = re.compile(
+    r"\d+\.\d+\s+(\d+\s+\S+\s+(rx|tx)\b|canfd\s|\d+\s+(\d\S*|[0-9a-f]+x?)(\s|$))",
+    re.IGNORECASE,
+)
 
 
 _ASC_WHOLE_END = re.compile(r"(\s[0-9A-Fa-f]{2}|\s[dD]\s+0|\s[rR](\s+[0-9A-Fa-f])?)$")
@@ -82,6 +88,7 @@ FORMATS: dict[str, TextFormat] = {
         resume_tail="\n",
         last_line="end triggerblock",
         complete=_asc_complete,
+        frame_shaped=lambda line: bool(_ASC_FRAME_SHAPED.match(line)),
     ),
     # the data (base64) are last: a cut leaves bad padding or too few bytes for the DLC
     ".csv": TextFormat(
@@ -208,7 +215,8 @@ class LineFeed:
         notes = [text for _, text in self._notes]
         self._notes = []
         if not self.fmt.known(line.strip(), self.number, notes):
-            why = f"{NOT_FRAME} ({'; '.join(notes)})" if notes else NOT_FRAME
+            what = "cannot parse" if self.fmt.frame_shaped(line.strip()) else NOT_FRAME
+            why = f"{what} ({'; '.join(notes)})" if notes else what
             self.report(f"line {self.number}: {why}: {quote(line)}")
 
 

@@ -63,6 +63,8 @@ class CaptureReader(Closing):
         self.position = 0
         self.errors: list[str] = []
         self.metadata: dict[str, Any] = {}
+        # the protocol of each byte bus, where the capture says it (a recording): bus -> name
+        self.protocols: dict[str, str] = {}
 
     def __iter__(self) -> Iterator[Item | SourceEvent]:
         raise NotImplementedError

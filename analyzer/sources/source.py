@@ -192,6 +192,11 @@ class CaptureSource(Source):
         if self.speed is None and self.frames is None:
             self.frames = candump_frames(self.reader)
 
+    @property
+    def protocols(self) -> dict[str, str]:
+        """The protocols the capture says its byte buses speak (a recording's)."""
+        return self.reader.protocols
+
     def batches(self, stop: threading.Event) -> Iterator[Batch]:
         if self.frames is not None:
             yield from self._native_batches(stop)

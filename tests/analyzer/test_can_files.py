@@ -584,7 +584,7 @@ JUNK = {
     ".asc": [
         ("this is junk", "not a frame"),
         (" 1.000000 1  4FF0001x        Rx   d 3 4G 0D 01", "cannot parse"),
-        (" 1.000000 1  4FF$001x        Rx   d 3 40 0D 01", "not a frame"),
+        (" 1.000000 1  4FF$001x        Rx   d 3 40 0D 01", "cannot parse"),  # frame-shaped
         (" 1.000000 1  4FF0001x        Rx   d 3 40", "DLC 3 but 1 data bytes"),
     ],
     ".trc": [

@@ -134,7 +134,8 @@ def test_a_missing_port_fails_at_once_and_touches_no_file(tmp_path: Path, comman
     out.write_bytes(b"a recording the user keeps")
     port = tmp_path / "ttyUSB0"
     t0 = time.monotonic()
-    res = eg2scope(command, "--serial", str(port), "-o", str(out), "--duration", "30")
+    # --force: even where replacing it is allowed, a source that never opened touches nothing
+    res = eg2scope(command, "--serial", str(port), "-o", str(out), "--force", "--duration", "30")
     assert time.monotonic() - t0 < 20  # not retried until --duration runs out
     assert res.returncode == 1, res.stderr
     assert res.stderr.strip() == (
@@ -485,7 +486,7 @@ def test_the_tui_on_a_missing_port_fails_at_once_and_touches_no_file(tmp_path: P
     out = tmp_path / "run.mcap"
     out.write_bytes(b"a recording the user keeps")
     port = tmp_path / "ttyUSB0"
-    code, said = _on_a_terminal("tui", "--serial", str(port), "-o", str(out))
+    code, said = _on_a_terminal("tui", "--serial", str(port), "-o", str(out), "--force")
     assert code == 1
     why = f"cannot open {port}: no such port (--wait waits for a device that is not plugged in yet)"
     assert said.strip() == f"eg2scope: error: {why}".encode()

@@ -13,6 +13,7 @@ from mcap.reader import make_reader
 from mcap_checks import assert_time_ordered, mcap_messages
 
 from analyzer import __version__, recording
+from analyzer.errors import UsageError
 from analyzer.listener import Listener, make_listener
 from analyzer.model import ERROR, INFO, WARNING, Item, SourceEvent, StateSample
 from analyzer.pipeline import Decoding
@@ -283,9 +284,9 @@ def test_capture_reader_yields_items_and_source_events(
         assert reader.errors == []
         assert reader.position == reader.size
     assert got == expected
-    # the bus override puts everything on one bus
-    with McapCaptureReader(recorded, bus="x") as reader:
-        assert {i.bus for i in reader} == {"x"}
+    # one name for several buses would merge them: refused, naming them
+    with pytest.raises(UsageError, match=r"recording of 4 buses \(can0, can1, rs485, ttyUSB0\)"):
+        McapCaptureReader(recorded, bus="x")
 
 
 def test_records_events_states_read_back(recorded: Path) -> None:

@@ -226,3 +226,34 @@ def test_unreadable_file_is_an_os_error_naming_it(shared_dir: Path, name: str) -
     path.write_bytes(b"\x00" * 100)
     path.chmod(0)
     assert _open_error(path) == f"PermissionError|cannot read {path}: permission denied"
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("garbled", ["11ZZZ", "1180002x Rx d 8 00 0Z"])
+def test_a_garbled_asc_frame_line_is_damage_where_it_is(
+    tmp_path: Path, engine: str, garbled: str
+) -> None:
+    """A frame line python-can's ASC reader skips in silence is reported with its line number,
+    exit 3, and every other frame is decoded (both engines read .asc through python-can)."""
+    if engine == "native":
+        from analyzer.native import available
+
+        if not available():
+            pytest.skip("the native core is not built")
+    path = tmp_path / "corrupt.asc"
+    messages = _messages(20)
+    _write(path, messages)
+    lines = path.read_text().splitlines(keepends=True)
+    frame_lines = [n for n, line in enumerate(lines) if " Rx " in line]
+    bad = frame_lines[7]
+    lines[bad] = f" 0.043885 1  {garbled}\n"
+    path.write_text("".join(lines))
+    proc = subprocess.run(
+        [sys.executable, "-m", "analyzer", "decode", str(path), "-f", "jsonl", "--engine", engine],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 3, proc.stderr
+    assert f"line {bad + 1}: cannot parse: '0.043885 1  {garbled}'" in proc.stderr
+    assert len(proc.stdout.splitlines()) == len(messages) - 1
