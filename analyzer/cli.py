@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from . import __version__, native
 from .commands import SUBCOMMANDS
 from .commands.helptext import EXIT_STATUS, HelpFormatter, epilog
-from .errors import EXIT_ERROR, EXIT_USAGE, UsageError, stop_status
+from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError, stop_status
 from .session import signals_as_interrupt
 
 
@@ -36,7 +36,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    try:  # the subcommands' imports take a moment: a Ctrl-C then ends it without a traceback
+        parser = build_parser()
+    except KeyboardInterrupt:
+        print("eg2scope: interrupted before it began", file=sys.stderr)
+        return EXIT_INTERRUPTED
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -491,3 +491,25 @@ def test_the_tui_on_a_missing_port_fails_at_once_and_touches_no_file(tmp_path: P
     why = f"cannot open {port}: no such port (--wait waits for a device that is not plugged in yet)"
     assert said.strip() == f"eg2scope: error: {why}".encode()
     assert out.read_bytes() == b"a recording the user keeps"
+
+
+def test_ctrl_c_while_the_commands_load_is_an_interruption_without_traceback(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The subcommands' imports take a moment after start: a Ctrl-C then (Python raises
+    KeyboardInterrupt inside whatever import runs) ends eg2scope with 130 and one line."""
+    import importlib
+
+    from analyzer import cli
+
+    real = importlib.import_module
+
+    def interrupted_import(name: str, package: str | None = None) -> object:
+        if name.endswith("commands.plot"):
+            raise KeyboardInterrupt
+        return real(name, package)
+
+    monkeypatch.setattr(cli.importlib, "import_module", interrupted_import)
+    assert cli.main(["decode", "x.bin"]) == 130
+    err = capsys.readouterr().err
+    assert err == "eg2scope: interrupted before it began\n"
