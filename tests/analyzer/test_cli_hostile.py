@@ -14,25 +14,13 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_process import ENV, eg2scope
 from recording.mcap_checks import assert_time_ordered
 
 from decoders import build as b
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURES = ROOT / "captures"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT), "NO_COLOR": "1"}
-
-
-def eg2scope(*args: str, timeout: float = 60, **kw: object) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "analyzer", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=ENV,
-        cwd=kw.pop("cwd", ROOT),  # type: ignore[arg-type]
-        **kw,  # type: ignore[call-overload]
-    )
 
 
 # -- usage errors: exit 2 at once ------------------------------------------------------------

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import orjson
 import pytest
+from cli_process import ENV, eg2scope
 from recording.mcap_checks import assert_time_ordered
 from taps.tap_helpers import Pty
 
@@ -28,19 +29,7 @@ from decoders import build as b
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURES = ROOT / "captures"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT), "NO_COLOR": "1"}
 SIGNALS = ["SIGINT", "SIGTERM"]
-
-
-def eg2scope(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "analyzer", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=ENV,
-        cwd=ROOT,
-    )
 
 
 def start(*args: str) -> subprocess.Popen[str]:

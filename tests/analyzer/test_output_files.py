@@ -5,31 +5,15 @@ keeps its plot."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from cli_process import eg2scope
 
 from analyzer.recording import McapCaptureReader
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURES = ROOT / "captures"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT), "NO_COLOR": "1"}
-ENV.pop("DISPLAY", None)
-ENV.pop("WAYLAND_DISPLAY", None)
-
-
-def eg2scope(*args: str, cwd: Path, timeout: float = 90) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "analyzer", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=ENV,
-        cwd=cwd,
-    )
 
 
 @pytest.mark.parametrize("command", ["record", "demo", "plot"])
