@@ -70,18 +70,10 @@ class Terminal:
             time.sleep(gap)
             self.read()
 
-    def quit(self, timeout: float = 30.0) -> int:
+    def quit(self, timeout: float = 30.0) -> int | None:
         """``q``, then the exit status once the process has gone."""
         self.child.send("q")
-        end = time.monotonic() + timeout
-        while self.child.isalive() and time.monotonic() < end:
-            self.read()
-        self.read()
-        if self.child.isalive():
-            self.child.terminate(force=True)
-            pytest.fail(f"still running {timeout} s after q; the screen:\n{self.text()}")
-        self.child.close()
-        return self.child.exitstatus
+        return finished(self, timeout)
 
     def after(self) -> str:
         """What was printed once the app had given the terminal back."""
