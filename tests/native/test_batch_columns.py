@@ -26,6 +26,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from native_core import skip_or_fail, why_not
 
 from analyzer import native
 from analyzer.model import Item, StateSample
@@ -34,27 +35,16 @@ from analyzer.tracker import Tracker
 from decoders.eg2_serial import Cmd
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 
-_native: Any = native._native if native.available() else None
-if _native is None or not hasattr(getattr(_native, "RecordBatch", None), "column"):
-    pytest.skip(
-        f"the native batches' columns are {native.WHY_NOT or 'not in this build'}",
-        allow_module_level=True,
-    )
+if why := why_not():
+    skip_or_fail(why)
+_native: Any = native._native
 
 # the generators of the other native tests (tests/native is on sys.path)
 import test_live_native as lv  # noqa: E402
+import test_tracker_native as tt  # noqa: E402
 
 RecordBatch = _native.RecordBatch
 LiveCan = _native.LiveCan
-
-tt: Any = None  # test_tracker_native's generators, where the core has the Tracker
-if hasattr(_native, "Tracker"):
-    import test_tracker_native as tt
-
-needs_samples = pytest.mark.skipif(
-    not hasattr(getattr(_native, "SampleBatch", None), "column"),
-    reason="the native core was built without SampleBatch.column",
-)
 
 RECORD_ATTRS = [f.name for f in dataclasses.fields(Record)]
 SAMPLE_ATTRS = [f.name for f in dataclasses.fields(StateSample)]
@@ -275,7 +265,6 @@ def test_columns_describe_the_records_as_decoded() -> None:
 # -- SampleBatch ----------------------------------------------------------------------------------
 
 
-@needs_samples
 @pytest.mark.parametrize("samples", [True, False])
 def test_live_can_samples(samples: bool) -> None:
     """LiveCan + the native Tracker against Decoding + Tracker, batch by batch, on the tracker
@@ -303,7 +292,6 @@ def test_live_can_samples(samples: bool) -> None:
     check_sample_columns(_native.Tracker().update_many(joined), Tracker().update_many(list(joined)))
 
 
-@needs_samples
 @pytest.mark.parametrize("protocol", [MODBUS_RTU, EG2_SERIAL])
 def test_byte_stream_samples(protocol: str) -> None:
     rng = random.Random(2)
@@ -325,7 +313,6 @@ def serial_record(seq: int, device: int, position: Any, bus: str = "s") -> Recor
     )  # fmt: skip
 
 
-@needs_samples
 def test_values_dicts_share_only_what_cannot_change() -> None:
     """A sample's values are made from its gripper's last ones: a value of the same type and
     bits may be the same object; 0.0 after -0.0, 1 after True, an equal list, are not."""
@@ -369,7 +356,6 @@ def odd_records(draw: st.DrawFn) -> Record:
     return rec
 
 
-@needs_samples
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(batches=st.lists(st.lists(odd_records(), max_size=12), max_size=6))
 def test_generated_records(batches: list[list[Record]]) -> None:
@@ -378,7 +364,6 @@ def test_generated_records(batches: list[list[Record]]) -> None:
         check_sample_columns(nat._update_records(batch), py.update_many(batch))
 
 
-@needs_samples
 def test_sample_names_and_empty() -> None:
     empty = _native.SampleBatch()
     for name in SAMPLE_ATTRS:
@@ -395,7 +380,6 @@ def test_sample_names_and_empty() -> None:
         got.column(None)
 
 
-@needs_samples
 def test_sample_columns_do_not_materialize() -> None:
     batch = LiveCan().feed(lv.items_of(lv.realistic(500)))
     got = _native.Tracker().update_many(batch)
@@ -413,7 +397,6 @@ def test_sample_columns_do_not_materialize() -> None:
     assert samples_in_memory() == before + 1
 
 
-@needs_samples
 def test_the_records_tracked_are_the_columns() -> None:
     """A sample's t, bus, device and seq are its record's (the columns of both batches agree)."""
     batch = LiveCan().feed(lv.items_of(lv.realistic(300), ("can0", "can1")))

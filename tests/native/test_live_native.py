@@ -29,20 +29,17 @@ import orjson
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from native_core import skip_or_fail, why_not
 
-from analyzer import native
 from analyzer.model import Item, json_default
 from analyzer.pipeline import Decoding
 from decoders import build as b
 from decoders.model import CanFrame, Chunk, Record
 
-if not native.available() or not hasattr(native._native, "LiveCan"):
-    pytest.skip(
-        f"the native live path is {native.WHY_NOT or 'not in this build'}",
-        allow_module_level=True,
-    )
+if why := why_not():
+    skip_or_fail(why)
 
-import native_corpus as corpus  # after the skip (tests/native is on sys.path)
+import native_corpus as corpus  # after the check (tests/native is on sys.path)
 from analyzer._native import LiveCan, RecordBatch, can_raw_messages
 
 from analyzer.batches import json_message

@@ -25,15 +25,16 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from native_core import skip_or_fail, why_not
 
-from analyzer import cli, native
+from analyzer import cli
 from decoders import build as b
 from decoders.model import CanFrame
 
-if not native.available():
-    pytest.skip(f"the native core is {native.WHY_NOT}", allow_module_level=True)
+if why := why_not():
+    skip_or_fail(why)
 
-import native_corpus as corpus  # after the skip (tests/native is on sys.path)
+import native_corpus as corpus  # after the check (tests/native is on sys.path)
 
 FORMATS = ("jsonl", "csv", "text")
 

@@ -12,6 +12,7 @@ from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import pytest
+from native_core import needs_native
 
 from analyzer import native
 from analyzer.cli import main
@@ -22,8 +23,6 @@ CAN = ROOT / "captures" / "can_pick_place.log"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "NO_COLOR": "1"}
 # the interpreter as if the extension were not built (an import of it fails)
 WITHOUT = "import sys; sys.modules['analyzer._native'] = None; from analyzer.cli import main; "
-
-needs_native = pytest.mark.skipif(not native.available(), reason=f"native core {native.WHY_NOT}")
 
 
 def run(*argv: str) -> tuple[int, str, str]:

@@ -22,15 +22,14 @@ import pyarrow.parquet as pq
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from native_core import skip_or_fail, why_not
 
-from analyzer import cli, native
+from analyzer import cli
 
-if not native.available():
-    pytest.skip(f"the native core is {native.WHY_NOT}", allow_module_level=True)
-if not hasattr(native._native, "ArrowRun"):
-    pytest.skip("the native core was built without ArrowRun", allow_module_level=True)
+if why := why_not():
+    skip_or_fail(why)
 
-import native_corpus as corpus  # after the skip (tests/native is on sys.path)
+import native_corpus as corpus  # after the check (tests/native is on sys.path)
 from test_native_differential import (  # the same inputs and strategies
     BLOBS,
     BYTE_OPTIONS,

@@ -13,8 +13,8 @@ from typing import Any
 
 import pytest
 from mcap.reader import make_reader
+from native_core import needs_native
 
-from analyzer import batches
 from analyzer.batches import NativeCanDecoding, session_engine
 from analyzer.listener import Listener
 from analyzer.model import ERROR, Item, SourceEvent, StateSample
@@ -29,9 +29,6 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "benchmarks"))
 from traffic import can_frames  # noqa: E402
 
-needs_native = pytest.mark.skipif(
-    not batches.native_session_available(), reason="the native core (with LiveCan) is not built"
-)
 T0 = 1_700_000_000.0  # long past: every tick expires whatever waits, on both engines alike
 
 

@@ -24,6 +24,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from native_core import skip_or_fail, why_not
 
 from analyzer import native
 from analyzer.batches import sample_series
@@ -32,12 +33,9 @@ from analyzer.pipeline import Decoding
 from analyzer.tracker import VALUE_KEYS, Tracker
 from decoders.model import EG2_SERIAL, MODBUS_RTU, Record
 
-_native: Any = native._native if native.available() else None
-if _native is None or not hasattr(getattr(_native, "SampleBatch", None), "series"):
-    pytest.skip(
-        f"SampleBatch.series is {native.WHY_NOT or 'not in this build'}",
-        allow_module_level=True,
-    )
+if why := why_not():
+    skip_or_fail(why)
+_native: Any = native._native
 
 # the generators and the comparison of the other native tests (tests/native is on sys.path)
 import test_batch_columns as bc  # noqa: E402

@@ -26,6 +26,7 @@ import orjson
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from native_core import skip_or_fail, why_not
 
 from analyzer import native
 from analyzer.model import Item, StateSample, json_default
@@ -48,11 +49,9 @@ from decoders.model import (
 )
 from decoders.registers import REGISTERS
 
-if not native.available():
-    pytest.skip(f"the native core is {native.WHY_NOT}", allow_module_level=True)
+if why := why_not():
+    skip_or_fail(why)
 _native: Any = native._native
-if not hasattr(_native, "Tracker"):
-    pytest.skip("the native core was built without the Tracker", allow_module_level=True)
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "benchmarks"))
@@ -381,12 +380,7 @@ def test_generated_records(batches: list[list[Record]], samples: bool) -> None:
 
 # -- the RecordBatch of LiveCan -------------------------------------------------------------------
 
-needs_live = pytest.mark.skipif(
-    not hasattr(_native, "LiveCan"), reason="the native core was built without LiveCan"
-)
 
-
-@needs_live
 @pytest.mark.parametrize("samples", [True, False])
 def test_live_can_batches(samples: bool) -> None:
     """Items through Decoding + Tracker against LiveCan + the native Tracker, batch by batch
