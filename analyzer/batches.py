@@ -24,11 +24,9 @@ import orjson
 from decoders.model import CanFrame, Record
 
 from .model import StateSample, json_default
-from .native import _native
+from .native import ENGINES, _native
 from .pipeline import Decoding
 from .tracker import Tracker
-
-ENGINES = ("auto", "python", "native")
 
 # the native batch classes (an empty tuple where the core is not built: isinstance is False)
 RecordBatch: Any = getattr(_native, "RecordBatch", ())

@@ -4,8 +4,8 @@
   interface, an output that is the input); nothing was read or written. Exit 2.
 - ``SourceError``: a live source never opened (no such port, no such CAN interface, a driver
   missing); nothing was captured or written. Exit 1.
-- ``DamagedInput``: the input was decoded as far as it goes, but it is damaged. Exit 3.
-Any other ``OSError``/``ValueError`` is exit 1.
+Any other ``OSError``/``ValueError`` is exit 1. An input decoded as far as it goes but damaged
+is no exception: the command reports each damage where it is and returns ``EXIT_DAMAGED`` (3).
 
 A command that runs until it is stopped (a live capture, the simulator) ends cleanly, exit 0,
 on Ctrl-C, SIGTERM or SIGHUP, as candump and tcpdump do; a file job interrupted before the end
@@ -30,10 +30,6 @@ class UsageError(ValueError):
 
 class SourceError(OSError):
     """A live source never opened: the message names the device and says why (exit 1)."""
-
-
-class DamagedInput(Exception):
-    """The input was decoded as far as possible but is damaged (exit 3)."""
 
 
 def runs_until_stopped(args: argparse.Namespace) -> bool:

@@ -63,9 +63,6 @@ except ImportError as exc:  # built, but for another platform, or damaged
 else:
     WHY_NOT = ""
 
-#: "native" when the extension is there, else "python"
-ENGINE = "python" if _native is None else "native"
-
 
 def available() -> bool:
     return _native is not None

@@ -88,7 +88,6 @@ SERIES: Final = (
     Series("current", CURRENT, "current", 0x2CA02CFF),
     Series("temperature_c", TEMPERATURE, "temperature (°C)", 0x9467BDFF),
 )
-SERIES_BY_FIELD: Final = {s.field: s for s in SERIES}
 # what each plot of a gripper shows, in legend order
 FORCE_ENTITIES: Final = (
     *(s.entity for s in SERIES if s.entity.startswith(f"{FORCE}/")),

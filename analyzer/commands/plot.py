@@ -7,9 +7,10 @@ import argparse
 import sys
 from typing import Any
 
-from ..batches import ENGINES, session_engine
+from ..batches import session_engine
 from ..errors import EXIT_INTERRUPTED, UsageError
 from ..listener import Listener
+from ..native import ENGINES
 from ..rerun_target import (
     SERVE_WEB,
     SPAWN,

@@ -9,9 +9,10 @@ from contextlib import ExitStack, redirect_stderr
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..batches import ENGINES, session_engine
+from ..batches import session_engine
 from ..errors import EXIT_ERROR, UsageError
 from ..listener import Listener
+from ..native import ENGINES
 from ..rerun_target import add_rerun_argument, rerun_listener
 from ..session import Session, SessionOptions, signals_call
 from ..sources.live import Tap

@@ -27,7 +27,6 @@ from ..sources.candump import RELATIVE_LIMIT
 from ..tracker import VALUE_KEYS
 
 BUS: Final = "bus"
-DAY: Final = "day"
 PATH: Final = "capture_path"
 HASH: Final = "capture_hash"
 INT: Final = pa.int64()
