@@ -1,12 +1,12 @@
 """Decoding a large capture file on every core: parts decoded in parallel, streamed in order.
 
 The decode path is sequential by nature (framing state, pending requests, timing rules), but
-that state only reaches back a bounded way. Each worker runs the session's own stages (Decoding,
-Tracker, the JSONL or CSV listener) over one part of the file, starting ``WARMUP`` bytes early and
-running ``WARMUP`` bytes past its end, so that framing, the CAN direction table, pairing and the
-timing linter are in the same state as in a one-piece decode; it keeps only the records that start
-inside its part. Records are numbered by their place in the input (``seq`` = offset, or CAN frame
-index), the same in every worker.
+that state only reaches back a bounded way. Each worker runs the session's decoding stage and
+its output listener (Decoding, the JSONL or CSV listener) over one part of the file, starting
+``WARMUP`` bytes early and running ``WARMUP`` bytes past its end, so that framing, the CAN
+direction table, pairing and the timing linter are in the same state as in a one-piece decode;
+it keeps only the records that start inside its part. Records are numbered by their place in
+the input (``seq`` = offset, or CAN frame index), the same in every worker.
 
 The joins are checked on the state that matters, and any doubt means one piece:
 - a part's own records must all be decided inside its overrun: a request of the part still waiting
@@ -52,7 +52,6 @@ from .model import Item
 from .pipeline import Decoding
 from .sources.can_files import CandumpReader, is_gzip
 from .sources.capture import RawBytesReader, can_bus_name
-from .tracker import Tracker
 
 if TYPE_CHECKING:
     from .commands.common import CaptureOptions
@@ -253,7 +252,8 @@ def _digest(rec: Record) -> tuple[int, int]:
 
 
 class _PartDecoder:
-    """The session's stages over one part: Decoding -> Tracker -> the output listener."""
+    """The session's stages over one part: Decoding -> the output listener (the gripper states
+    a Tracker would fold are no part of decode's output)."""
 
     def __init__(self, part: Part, out: IO[bytes]) -> None:
         self.part = part
@@ -261,19 +261,16 @@ class _PartDecoder:
         self.decoding = Decoding(
             job.protocol, positional_seq=True, start_offset=part.warm_lo, can_index=part.can_index
         )
-        self.tracker = Tracker()
         self.output = _output(job.fmt, out)
         if job.kind == "bytes":
             self.lo, self.hi = part.lo, part.hi
         else:
             self.lo, self.hi = part.index_lo, part.index_hi
         self.result = PartResult(b"", None, None, 0)
-        self.head_limit = self.lo + (WARMUP[job.kind] if job.kind == "bytes" else 1 << 30)
 
     def take(self, records: list[Record], final: bool = False) -> None:
         if not records:
             return
-        self.tracker.update_many(records)  # the Tracker runs on every path
         lo, hi, res = self.lo, self.hi, self.result
         mine = [r for r in records if lo <= _position(r) < hi]
         if not final:
