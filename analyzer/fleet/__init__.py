@@ -3,8 +3,12 @@
 - ``inputs``: which files a run takes (globs, folders, files) and their content hash;
 - ``layout``: the dataset's folders and file names, atomic writes, what is done already;
 - ``tables``: the ``states/`` and ``captures/`` columns;
+- ``listeners``: what fills one capture's tables, from the native core's columns or a session;
+- ``summary``: a capture's ``captures/`` counts, gathered from its columns;
+- ``partitions``: one capture's rows written into its day and bus partitions, then committed;
 - ``capture_task``: one capture decoded into its partitions (what a Dask worker runs);
-- ``runner``: the captures run in one loop or on Dask, with a progress bar and a summary.
+- ``runner``: the captures run in one loop or on Dask;
+- ``progress``: the progress bar, the lines of captures that went wrong, the summary table.
 
 docs/fleet.md describes the dataset and how to query it.
 """

@@ -1,1 +1,2 @@
-"""Where records go: text, JSONL, CSV, MCAP, Rerun."""
+"""Where records go, as session listeners: text, JSONL, CSV, Parquet, statistics and Rerun
+(the MCAP recorder is ``analyzer/recording.py``)."""

@@ -38,9 +38,9 @@ def message_to_frame(msg: can.Message, t: float | None = None) -> CanFrame:
 
 
 def frame_to_message(frame: CanFrame) -> can.Message:
+    """``frame`` as a python-can Message (a frame without a time gets python-can's 0.0)."""
     import can
 
-    """``frame`` as a python-can Message (a frame without a time gets python-can's 0.0)."""
     return can.Message(
         timestamp=0.0 if frame.t is None else frame.t,
         arbitration_id=frame.arbitration_id,
