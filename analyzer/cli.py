@@ -8,11 +8,12 @@ import os
 import sys
 from collections.abc import Sequence
 
-from . import __version__, native
+from . import __version__
 from .commands import SUBCOMMANDS
 from .commands.helptext import EXIT_STATUS, HelpFormatter, epilog
 from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError, stop_status
-from .session import signals_as_interrupt
+from .session import engine as native
+from .session.session import signals_as_interrupt
 
 
 def build_parser() -> argparse.ArgumentParser:

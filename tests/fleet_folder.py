@@ -24,8 +24,8 @@ from pathlib import Path
 
 import can
 
-from analyzer.recording import McapRecorder
-from analyzer.session import Session
+from analyzer.recording.reader import McapRecorder
+from analyzer.session.session import Session
 from analyzer.sources.capture import open_capture
 from analyzer.sources.source import CaptureSource
 from decoders.build import candump_line

@@ -14,7 +14,7 @@ from typing import NoReturn
 
 import pytest
 
-from analyzer import native
+from analyzer.session import engine as native
 
 #: what the product and the tests call on the core: a class or function, or "Class.method"
 CORE_API = (

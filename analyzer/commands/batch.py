@@ -7,9 +7,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .. import native
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..interrupts import noted_interrupts
+from ..session import engine as native
 from .common import add_protocol_argument, positive_int
 from .helptext import BATCH_EXIT_STATUS, HelpFormatter
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..live_runner import add_session_arguments, run_session
 from ..sources.naming import UNNAMED
 from ..sources.serial_tap import SerialBridge
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
@@ -16,7 +17,6 @@ from .livesource import (
     named_serial_tap,
     serial_bus_name,
 )
-from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:

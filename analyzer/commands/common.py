@@ -13,9 +13,9 @@ from decoders.model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Record
 from decoders.registry import resolve_protocol, short_name
 
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
-from ..listener import Listener
 from ..model import SourceEvent
-from ..session import Session, SessionCounts, SessionOptions
+from ..session.listener import Listener
+from ..session.session import Session, SessionCounts, SessionOptions
 from ..sources.capture import CaptureReader, open_capture
 from ..sources.pacing import parse_speed
 from ..sources.source import CaptureSource
@@ -136,7 +136,7 @@ class CaptureOptions:
     errors_only: bool = False
     speed: float | None = None
     progress: bool = True
-    engine: str = "auto"  # the session's: analyzer/batches.py
+    engine: str = "auto"  # the session's: analyzer/session/batches.py
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> CaptureOptions:

@@ -11,12 +11,12 @@ from typing import IO, Any
 
 from decoders.registry import PROTOCOL_WORDS, short_name, valid_frames
 
-from .. import native
 from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
-from ..listener import Listener, make_listener
 from ..outfile import OutputError, output_stream
-from ..pipeline import DETECT_BYTES
-from ..session import Session
+from ..session import engine as native
+from ..session.listener import Listener, make_listener
+from ..session.session import Session
+from ..session.stage import DETECT_BYTES
 from ..sources import sniff
 from ..sources.capture import CaptureReader, GzipBytesReader, RawBytesReader
 from .common import (
@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     if hint:
         print(f"eg2scope: {opts.path}: {hint}", file=sys.stderr)
     nrun = native.open_for(args, opts, reader, text_colour(args))
-    if nrun is not None:  # the native core decodes it (analyzer/native.py)
+    if nrun is not None:  # the native core decodes it (analyzer/session/engine.py)
         with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
             code = native.decode(nrun, opts.path, out, args.output, opts.progress)
         if code == EXIT_INTERRUPTED:
@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
             report_empty(opts.path, nrun.size, nrun.records_written, opts.filter_words())
         return code
     with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
-        from ..parallel import JoinError, decode_in_parallel, resumed
+        from ..session.parallel import JoinError, decode_in_parallel, resumed
 
         resume = 0
         try:

@@ -7,11 +7,11 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from ..session import Session
+from ..live_runner import Extra, add_session_arguments, check_recording_output, run_session
+from ..session.session import Session
 from ..sim.rig import BUSES, DemoRig
 from .common import probability
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
-from .session import Extra, add_session_arguments, check_recording_output, run_session
 
 
 def add_subparser(sub: Any) -> None:

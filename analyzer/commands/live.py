@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..rerun_target import add_rerun_argument
+from ..live_runner import add_session_arguments, run_session
+from ..plot.target import add_rerun_argument
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, open_taps
-from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:

@@ -7,11 +7,9 @@ import argparse
 import sys
 from typing import Any
 
-from ..batches import session_engine
 from ..errors import EXIT_INTERRUPTED, UsageError
-from ..listener import Listener
-from ..native import ENGINES
-from ..rerun_target import (
+from ..live_runner import add_session_arguments, run_session
+from ..plot.target import (
     SERVE_WEB,
     SPAWN,
     RerunTarget,
@@ -19,7 +17,10 @@ from ..rerun_target import (
     default_target,
     save_target,
 )
-from ..session import Session
+from ..session.batches import session_engine
+from ..session.engine import ENGINES
+from ..session.listener import Listener
+from ..session.session import Session
 from ..sources.capture import CaptureReader
 from .common import (
     CaptureOptions,
@@ -32,7 +33,6 @@ from .common import (
 from .demo import add_demo_arguments
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
 from .livesource import CAN_KEYS, add_source_arguments, open_taps
-from .session import add_session_arguments, run_session
 
 
 def add_subparser(sub: Any) -> None:
@@ -151,7 +151,7 @@ def chosen_target(args: argparse.Namespace, source: str | None) -> RerunTarget:
 
 
 def plot_capture(args: argparse.Namespace) -> int:
-    from ..sinks.rerun import LIVE_FLUSH_S, RerunListener
+    from ..plot.listener import LIVE_FLUSH_S, RerunListener
 
     if args.output:
         raise UsageError("-o records a live source; a capture is plotted as it is")
@@ -228,7 +228,7 @@ def plot_live(args: argparse.Namespace) -> int:
 
 
 def made_listener(made: list[Any], target: RerunTarget) -> list[Any]:
-    from ..sinks.rerun import RerunListener
+    from ..plot.listener import RerunListener
 
     made.append(RerunListener(target, live=True))
     return made

@@ -9,12 +9,19 @@ from contextlib import ExitStack, redirect_stderr
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..batches import session_engine
 from ..errors import EXIT_ERROR, UsageError
-from ..listener import Listener
-from ..native import ENGINES
-from ..rerun_target import add_rerun_argument, rerun_listener
-from ..session import Session, SessionOptions, signals_call
+from ..live_runner import (
+    add_session_arguments,
+    byte_times,
+    check_recording_output,
+    open_source,
+    recorder,
+)
+from ..plot.target import add_rerun_argument, rerun_listener
+from ..session.batches import session_engine
+from ..session.engine import ENGINES
+from ..session.listener import Listener
+from ..session.session import Session, SessionOptions, signals_call
 from ..sources.live import Tap
 from .common import (
     CaptureOptions,
@@ -27,13 +34,6 @@ from .common import (
 from .demo import add_demo_arguments
 from .helptext import EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, open_taps
-from .session import (
-    add_session_arguments,
-    byte_times,
-    check_recording_output,
-    open_source,
-    recorder,
-)
 
 if TYPE_CHECKING:
     from ..tui.app import Eg2ScopeApp, SessionPlan

@@ -22,10 +22,12 @@ import pyarrow as pa
 from decoders.model import EG2_SERIAL
 from decoders.registry import detect_protocol, short_name
 
-from .. import __version__, native, native_parquet
+from .. import __version__
 from ..commands.common import CaptureOptions, byte_protocol, open_reader, run_capture
 from ..commands.decode import protocol_hint
-from ..pipeline import DETECT_BYTES
+from ..parquet import native as native_parquet
+from ..session import engine as native
+from ..session.stage import DETECT_BYTES
 from ..sources import sniff
 from ..sources.capture import CAPTURE_READERS, RAW_BYTES, CaptureReader, reader_for
 from ..sources.naming import BUS_BY_PROTOCOL
@@ -169,7 +171,7 @@ def _fill(
 
 def _native_run(opts: CaptureOptions, reader: CaptureReader) -> Any:
     """The native core's run of a capture, records and state samples as columns, or None:
-    the core does not read this capture (as ``decode`` decides, analyzer/native.py)."""
+    the core does not read this capture (as ``decode`` decides, analyzer/session/engine.py)."""
     if native.ineligible(reader, "parquet", None, None):
         return None
     try:

@@ -12,10 +12,10 @@ import pyarrow as pa
 
 from decoders.model import Record
 
-from ..batches import records_jsonl
-from ..listener import Listener
 from ..model import StateSample
-from ..sinks.parquet import JsonlTables
+from ..parquet.writer import JsonlTables
+from ..session.batches import records_jsonl
+from ..session.listener import Listener
 from . import layout
 from .partitions import PartitionFiles
 from .summary import RecordSummary

@@ -8,7 +8,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from ..sinks.parquet import RowGroupWriter
+from ..parquet.writer import RowGroupWriter
 from . import layout
 from .tables import BUS, HASH, PATH, STATE_DICTIONARY, days
 

@@ -38,7 +38,7 @@ FOLD_ROWS = 1 << 18
 
 class RecordSummary:
     """``CaptureStats`` of the records, filled from tables in the records' Parquet columns
-    (``analyzer.parquet_schema.SCHEMA``, ``bus`` included): the capture's counts, flags and
+    (``analyzer.parquet.schema.SCHEMA``, ``bus`` included): the capture's counts, flags and
     devices with their counts and latency. (``commands``, the ID-scan notes and source events,
     which the ``captures/`` row does not hold, are left empty.) The columns counted are held
     until ``FOLD_ROWS`` of them wait, or ``stats`` is read."""

@@ -18,13 +18,13 @@ import pyarrow.compute as pc
 
 from decoders.registers import fault_text, state_text
 
-from .. import native_parquet
-from ..batches import SampleBatch
 from ..model import StateSample
-from ..parquet_schema import SCHEMA as RECORD_SCHEMA
-from ..parquet_schema import described_field, millimetres
+from ..parquet import native as native_parquet
+from ..parquet.schema import SCHEMA as RECORD_SCHEMA
+from ..parquet.schema import described_field, millimetres
+from ..session.batches import SampleBatch
+from ..session.tracker import VALUE_KEYS
 from ..sources.candump import RELATIVE_LIMIT
-from ..tracker import VALUE_KEYS
 
 BUS: Final = "bus"
 PATH: Final = "capture_path"
@@ -90,7 +90,7 @@ _TYPES_SCHEMA: Final = pa.schema(
     [pa.field(BUS, STR), *(STATES_SCHEMA.field(k) for k in _STATE_KEYS)]
 )
 #: what a state sample holds (its bus kept, for partitioning), the columns the native core
-#: fills (analyzer/native_parquet.py describes them to it); the words and millimetres are
+#: fills (analyzer/parquet/native.py describes them to it); the words and millimetres are
 #: derived from them (``_derived``)
 _DERIVED: Final = ("opening_mm", "target_mm", "state_text", "fault_text")
 STATE_COLUMNS: Final = pa.schema([f for f in _TYPES_SCHEMA if f.name not in _DERIVED])

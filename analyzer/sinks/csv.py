@@ -11,7 +11,7 @@ import orjson
 
 from decoders.model import Record
 
-from ..listener import Listener
+from ..session.listener import Listener
 
 COLUMNS = (
     "seq",

@@ -13,9 +13,9 @@ import orjson
 
 from decoders.model import Record
 
-from ..batches import records_jsonl
-from ..listener import Listener
 from ..model import SourceEvent
+from ..session.batches import records_jsonl
+from ..session.listener import Listener
 
 
 class JsonlListener(Listener):

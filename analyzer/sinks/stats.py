@@ -6,8 +6,8 @@ from collections.abc import Sequence
 
 from decoders.model import Record
 
-from ..listener import Listener
 from ..model import SourceEvent
+from ..session.listener import Listener
 from ..stats import CaptureStats
 
 

@@ -14,8 +14,8 @@ from typing import IO
 from decoders.flags import ESTIMATED_TIME
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
-from ..listener import Listener
 from ..model import SourceEvent
+from ..session.listener import Listener
 
 RED, YELLOW, RESET = "\x1b[31m", "\x1b[33m", "\x1b[0m"
 ARROWS = {REQUEST: "→", RESPONSE: "←"}

@@ -5,8 +5,8 @@ python-can's LogReader chooses its readers).
 - CAN logs: candump logs in every layout, PCAN traces and everything python-can reads
   (``can_files``), also gzip compressed where they can be read from a stream (``can.log.gz``,
   ``trace.asc.gz``);
-- eg2scope recordings: ``.mcap`` (``analyzer.recording``: the raw topics are decoded again, the
-  recorded source events come back in place);
+- eg2scope recordings: ``.mcap`` (``analyzer.recording.reader``: the raw topics are decoded again,
+  the recorded source events come back in place);
 - anything else: raw bytes of a serial line (regular serial protocol or Modbus RTU); ``.gz``:
   such bytes, compressed.
 
@@ -41,7 +41,7 @@ _CAN_LOG = "analyzer.sources.capture:CanLogReader"
 #: suffix (lower case, compound ones whole: ".log.gz") -> "module:Class" of its reader
 CAPTURE_READERS: dict[str, str] = {
     **{suffix: _CAN_LOG for suffix in sorted(can_files.CAN_SUFFIXES)},
-    ".mcap": "analyzer.recording:McapCaptureReader",
+    ".mcap": "analyzer.recording.reader:McapCaptureReader",
     ".gz": "analyzer.sources.capture:GzipBytesReader",
 }
 RAW_BYTES = "analyzer.sources.capture:RawBytesReader"  # any other suffix

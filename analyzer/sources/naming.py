@@ -24,7 +24,7 @@ from decoders.model import EG2_SERIAL, MODBUS_RTU
 from decoders.registry import detect_protocol
 
 from ..model import INFO, Item, SourceEvent
-from ..pipeline import DETECT_BYTES
+from ..session.stage import DETECT_BYTES
 from .live import CLOSED, LOST, Tap
 
 BUS_BY_PROTOCOL: Final = {EG2_SERIAL: "rs232", MODBUS_RTU: "rs485"}

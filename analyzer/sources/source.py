@@ -186,8 +186,9 @@ class CaptureSource(Source):
 
     def read_natively(self) -> None:
         """A candump log read at full speed is read by the native core, as ``decode`` reads
-        it (analyzer/native.py ``candump_frames``): the same frames, bus names and errors."""
-        from ..native import candump_frames
+        it (analyzer/session/engine.py ``candump_frames``): the same frames, bus names and
+        errors."""
+        from ..session.engine import candump_frames
 
         if self.speed is None and self.frames is None:
             self.frames = candump_frames(self.reader)

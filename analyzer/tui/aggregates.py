@@ -15,7 +15,7 @@ from typing import Any, Final
 from decoders import flags as F
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
-from ..batches import column
+from ..session.batches import column
 
 LATENCY_KEEP: Final = 2000  # latencies kept per key for percentiles (the latest)
 HISTOGRAM_BINS: Final = 8

@@ -29,7 +29,7 @@ from textual.widgets import Footer, Input, Static, TabbedContent, TabPane
 from textual.worker import Worker, WorkerState
 
 from ..model import ERROR, LEVEL_NAMES, SourceEvent
-from ..session import Session
+from ..session.session import Session
 from . import keys
 from .aggregates import Snapshot
 from .export import export, export_format

@@ -24,12 +24,12 @@ from typing import Any, Final, Protocol
 from decoders import flags as F
 from decoders.model import Record
 
-from ..listener import Listener
 from ..model import SourceEvent, StateSample
+from ..session.listener import Listener
+from ..session.timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 from .aggregates import Aggregates
 from .messages import DeviceRow, FeedUpdate
 from .store import RecordStore
-from .timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 
 POST_INTERVAL_S: Final = 0.1  # 10 updates a second
 PANELS_INTERVAL_S: Final = 1.0  # the panels' tables (problems, registers, latency) this often

@@ -28,8 +28,8 @@ import orjson
 
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
-from ..batches import column
 from ..model import json_default
+from ..session.batches import column
 
 BLOCK: Final = 256  # records per compressed block
 MAX_FLAG_BITS: Final = 63  # bit 63 collects codes beyond the first 63 seen

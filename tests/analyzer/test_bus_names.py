@@ -18,7 +18,7 @@ import pytest
 from taps.tap_helpers import Pty
 
 from analyzer.model import INFO, WARNING, Item, SourceEvent
-from analyzer.recording import McapCaptureReader
+from analyzer.recording.reader import McapCaptureReader
 from analyzer.sources.live import Tap
 from analyzer.sources.naming import BusNamer
 from decoders import build as b

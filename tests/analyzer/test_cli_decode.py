@@ -291,7 +291,7 @@ def test_parallel_decode_equals_one_piece(
     """Large captures are decoded in parts on every core; the output must not change."""
     import random
 
-    import analyzer.parallel as parallel
+    import analyzer.session.parallel as parallel
     from decoders import build as b
 
     # small parts, so that a small file is split into many, with joins everywhere
@@ -348,7 +348,7 @@ def test_split_decode_that_fails_a_join_midway_goes_on_in_one_piece(
     capsysbinary, tmp_path: Path, monkeypatch
 ) -> None:
     """Parts already written stay; the rest comes from a one-piece decode, nothing doubled."""
-    import analyzer.parallel as parallel
+    import analyzer.session.parallel as parallel
     from decoders import build as b
 
     monkeypatch.setitem(parallel.PART_BYTES, "bytes", 20_000)

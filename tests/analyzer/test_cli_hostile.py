@@ -223,7 +223,7 @@ def test_record_without_show_prints_events_as_they_happen(tmp_path: Path) -> Non
 
 @pytest.mark.parametrize("sig", ["SIGHUP", "SIGTERM"])
 def test_a_closed_terminal_finishes_the_recording(tmp_path: Path, sig: str) -> None:
-    from analyzer.recording import McapCaptureReader
+    from analyzer.recording.reader import McapCaptureReader
 
     path = tmp_path / "demo.mcap"
     proc = subprocess.Popen(

@@ -24,7 +24,7 @@ from cli_process import ENV, eg2scope
 from recording.mcap_checks import assert_time_ordered
 from taps.tap_helpers import Pty
 
-from analyzer.recording import McapCaptureReader
+from analyzer.recording.reader import McapCaptureReader
 from decoders import build as b
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -367,7 +367,7 @@ def _empty_captures(tmp_path: Path) -> dict[str, Path]:
     with can.BLFWriter(str(blf)):
         pass
     mcap = paths["empty.mcap"] = tmp_path / "empty.mcap"
-    from analyzer.recording import McapRecorder
+    from analyzer.recording.reader import McapRecorder
 
     McapRecorder(mcap).close()  # a recording of a source that captured nothing
     return paths

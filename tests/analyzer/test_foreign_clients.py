@@ -20,9 +20,9 @@ import can.player
 import pytest
 from pymodbus.client import ModbusSerialClient
 
-from analyzer.pipeline import Decoding
-from analyzer.recording import McapRecorder, read_records
-from analyzer.session import Session, live_session
+from analyzer.recording.reader import McapRecorder, read_records
+from analyzer.session.session import Session, live_session
+from analyzer.session.stage import Decoding
 from analyzer.sim.endpoints import ModbusGripperServer
 from analyzer.sim.gripper import GripperModel
 from analyzer.sim.ptybus import PtyBus

@@ -13,9 +13,9 @@ from pathlib import Path
 import can
 
 from analyzer.model import Item
-from analyzer.pipeline import Decoding
-from analyzer.recording import McapRecorder, read_events, read_records
-from analyzer.session import Session, live_session
+from analyzer.recording.reader import McapRecorder, read_events, read_records
+from analyzer.session.session import Session, live_session
+from analyzer.session.stage import Decoding
 from analyzer.sinks.text import TextListener
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.capture import open_capture

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from cli_process import eg2scope
 
-from analyzer.recording import McapCaptureReader
+from analyzer.recording.reader import McapCaptureReader
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURES = ROOT / "captures"

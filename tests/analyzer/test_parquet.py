@@ -28,11 +28,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 from protocol_vectors import load
 
-from analyzer.batches import records_jsonl
 from analyzer.model import Item, SourceEvent
-from analyzer.parquet_schema import FAMILY, RECORD_COLUMNS, SCHEMA
-from analyzer.pipeline import Decoding
-from analyzer.sinks import parquet as P
+from analyzer.parquet import writer as P
+from analyzer.parquet.schema import FAMILY, RECORD_COLUMNS, SCHEMA
+from analyzer.session.batches import records_jsonl
+from analyzer.session.stage import Decoding
 from decoders import build as b
 from decoders.eg2_serial import Cmd
 from decoders.model import EG2_SERIAL, MODBUS_RTU, CanFrame, Chunk
@@ -443,7 +443,7 @@ def test_a_listener_whose_output_failed_writes_nothing_more(tmp_path: Path) -> N
     footer written to the closed file, no "Exception ignored" on stderr."""
     script = (
         "import gc, sys\n"
-        "from analyzer.sinks.parquet import ParquetListener\n"
+        "from analyzer.parquet.writer import ParquetListener\n"
         f"f = open({str(tmp_path / 'x.parquet')!r}, 'wb')\n"
         "listener = ParquetListener(f)\n"
         "listener.on_error(OSError(28, 'No space left on device'))\n"

@@ -18,10 +18,10 @@ import pytest
 from recording.mcap_checks import assert_time_ordered
 
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.listener import Listener, listener_class, make_listener
 from analyzer.model import SourceEvent
-from analyzer.recording import McapRecorder, read_events, read_records, read_states
-from analyzer.session import Session, SessionOptions, live_session
+from analyzer.recording.reader import McapRecorder, read_events, read_records, read_states
+from analyzer.session.listener import Listener, listener_class, make_listener
+from analyzer.session.session import Session, SessionOptions, live_session
 from analyzer.sinks.jsonl import JsonlListener
 from analyzer.sinks.stats import StatsListener
 from analyzer.sources.capture import open_capture

@@ -14,10 +14,10 @@ from typing import Any
 import can
 import pytest
 
-from analyzer.batches import native_session_available
-from analyzer.listener import Listener
 from analyzer.model import Item, SourceEvent
-from analyzer.session import Session, SessionOptions
+from analyzer.session.batches import native_session_available
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session, SessionOptions
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.serial_tap import SerialTap
 from analyzer.sources.source import LiveSource

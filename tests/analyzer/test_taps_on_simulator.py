@@ -11,8 +11,8 @@ from __future__ import annotations
 import threading
 import time
 
-from analyzer.listener import Listener
-from analyzer.session import Session, live_session
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session, live_session
 from analyzer.sim.endpoints import CanGripperServer, SerialGripperServer
 from analyzer.sim.gripper import GripperModel
 from analyzer.sim.host import HostQuirks, run_host_cycle

@@ -7,7 +7,7 @@ Five ways records become Parquet, each in a fresh child process (its peak RSS fr
 median of ``--runs``:
 
 - ``native arrow``: the native core decodes the capture and builds the Arrow columns itself
-  (analyzer/native_parquet.py: no JSON), ``write_parsed`` writes them: what ``eg2scope decode
+  (analyzer/parquet/native.py: no JSON), ``write_parsed`` writes them: what ``eg2scope decode
   --format parquet`` runs with the native core (skipped without it);
 - ``jsonl batches``: ``write_jsonl_batches`` over the JSONL of the capture read in 1 MiB pieces,
   as the native core hands its output over (the JSONL is made once, by ``eg2scope decode``);
@@ -48,7 +48,7 @@ PIECE = 1 << 20
 
 
 def child_jsonl(jsonl: Path, out: Path) -> dict[str, float]:
-    from analyzer.sinks.parquet import write_jsonl_batches
+    from analyzer.parquet.writer import write_jsonl_batches
 
     def pieces():
         with jsonl.open("rb") as f:
@@ -71,7 +71,7 @@ def child_arrow(jsonl: Path, out: Path) -> dict[str, float]:
     import pyarrow as pa
     import pyarrow.json as pj
 
-    from analyzer.sinks import parquet as P
+    from analyzer.parquet import writer as P
 
     tables = []
     with jsonl.open("rb") as f:
@@ -93,7 +93,8 @@ def child_arrow(jsonl: Path, out: Path) -> dict[str, float]:
 
 def child_native(capture: Path, protocol: str, out: Path) -> dict[str, float]:
     """The native core's records as Arrow columns to Parquet (decoding included)."""
-    from analyzer import native, native_parquet
+    from analyzer.parquet import native as native_parquet
+    from analyzer.session import engine as native
 
     start, cpu = time.perf_counter(), time.process_time()
     byte_protocol = {"serial": "eg2-serial", "modbus": "modbus-rtu"}.get(protocol)
@@ -107,15 +108,15 @@ def child_native(capture: Path, protocol: str, out: Path) -> dict[str, float]:
 
 
 def native_arrow_available() -> bool:
-    from analyzer import native
+    from analyzer.session import engine as native
 
     return native.available() and hasattr(native._native, "ArrowRun")
 
 
 def child_listener(capture: Path, protocol: str, out: Path) -> dict[str, float]:
     from analyzer.model import Item
-    from analyzer.pipeline import Decoding
-    from analyzer.sinks.parquet import ParquetListener
+    from analyzer.parquet.writer import ParquetListener
+    from analyzer.session.stage import Decoding
     from analyzer.sources.can_files import open_can_file
     from decoders.model import Chunk
     from decoders.registry import resolve_protocol

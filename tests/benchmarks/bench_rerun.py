@@ -59,7 +59,7 @@ MIN_UPDATES_PER_S = 10
 DECODE_ONLY = """
 import sys
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.listener import Listener
+from analyzer.session.listener import Listener
 class Null(Listener):
     wants_states = sys.argv[2] == "states"
     def on_records(self, records): pass
@@ -179,13 +179,13 @@ def bench_live(rate: int, duration: float, tmp: Path, rerun: bool = True) -> boo
     """``rate`` records/s: requests and responses, half each (``rate`` frames/s)."""
     from bench_record import flood_can
 
-    from analyzer.session import live_session
-    from analyzer.sinks.rerun import RerunListener
+    from analyzer.plot.listener import RerunListener
+    from analyzer.session.session import live_session
     from analyzer.sources.can_tap import CanTap
     from analyzer.sources.live import wait_open
 
     channel = f"bench-rerun-{os.getpid()}-{time.monotonic_ns()}"
-    from analyzer.listener import Listener
+    from analyzer.session.listener import Listener
 
     class NullStates(Listener):
         """Decoding and state samples, no output: the live baseline."""

@@ -241,7 +241,7 @@ def test_layout_names_every_module(module: str) -> None:
 
 
 def test_every_registered_listener_is_named() -> None:
-    from analyzer.listener import LISTENERS
+    from analyzer.session.listener import LISTENERS
 
     text = section(ARCHITECTURE, "The listener contract")
     for name in LISTENERS:

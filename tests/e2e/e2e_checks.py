@@ -20,12 +20,12 @@ import orjson
 import pytest
 from e2e_inputs import EG2SCOPE, HEADLESS, ROOT
 
-from analyzer.batches import native_session_available
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.listener import Listener
 from analyzer.model import StateSample
-from analyzer.native import available as native_decode_available
-from analyzer.session import Session, SessionOptions
+from analyzer.session.batches import native_session_available
+from analyzer.session.engine import available as native_decode_available
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session, SessionOptions
 from decoders.eg2_serial import COMMANDS
 from decoders.registers import REGISTERS, opening_mm
 

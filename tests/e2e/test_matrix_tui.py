@@ -16,10 +16,10 @@ from e2e_checks import force_session_engine, seq_names, skip_unless_native
 from e2e_inputs import CAN_IDS, IDS
 from textual.worker import Worker, WorkerState
 
-from analyzer.batches import record_messages
 from analyzer.cli import build_parser
 from analyzer.commands.tui import capture_plan
-from analyzer.session import Session
+from analyzer.session.batches import record_messages
+from analyzer.session.session import Session
 from analyzer.tui.app import Eg2ScopeApp
 
 SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]

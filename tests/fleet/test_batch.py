@@ -15,13 +15,14 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
-from analyzer import cli, native
+from analyzer import cli
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import content_hash, expand
-from analyzer.listener import Listener
 from analyzer.model import StateSample
-from analyzer.parquet_schema import SCHEMA
-from analyzer.session import Session
+from analyzer.parquet.schema import SCHEMA
+from analyzer.session import engine as native
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session
 from analyzer.sources.capture import open_capture
 from analyzer.sources.source import CaptureSource
 

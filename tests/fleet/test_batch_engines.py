@@ -14,9 +14,10 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from analyzer import cli, native
+from analyzer import cli
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import expand
+from analyzer.session import engine as native
 
 ROOT = Path(__file__).resolve().parents[2]
 

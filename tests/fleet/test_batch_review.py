@@ -17,9 +17,10 @@ import can
 import pyarrow.dataset as ds
 import pytest
 
-from analyzer import cli, native
+from analyzer import cli
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import content_hash
+from analyzer.session import engine as native
 
 ROOT = Path(__file__).resolve().parents[2]
 SERIAL = ROOT / "captures/serial_session.bin"

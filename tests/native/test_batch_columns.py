@@ -28,10 +28,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from native_core import skip_or_fail, why_not
 
-from analyzer import native
 from analyzer.model import Item, StateSample
-from analyzer.pipeline import Decoding
-from analyzer.tracker import Tracker
+from analyzer.session import engine as native
+from analyzer.session.stage import Decoding
+from analyzer.session.tracker import Tracker
 from decoders.eg2_serial import Cmd
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 

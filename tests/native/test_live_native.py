@@ -1,7 +1,7 @@
 """The native live CAN path (``analyzer._native.LiveCan``, ``RecordBatch``,
 ``can_raw_messages``) against the Python one it stands in for.
 
-The same Items, ticks, gaps and end go through ``analyzer.pipeline.Decoding`` and through
+The same Items, ticks, gaps and end go through ``analyzer.session.stage.Decoding`` and through
 ``LiveCan``; after every step both must give the same records: the materialized objects compare
 == to the Python's (and have the same types, down to the JSON of their fields), and the batch's
 bulk methods (``messages``, ``times``, ``buses``, ``error_count``, ``problems``) say what the
@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 from native_core import skip_or_fail, why_not
 
 from analyzer.model import Item, json_default
-from analyzer.pipeline import Decoding
+from analyzer.session.stage import Decoding
 from decoders import build as b
 from decoders.model import CanFrame, Chunk, Record
 
@@ -42,8 +42,8 @@ if why := why_not():
 import native_corpus as corpus  # after the check (tests/native is on sys.path)
 from analyzer._native import LiveCan, RecordBatch, can_raw_messages
 
-from analyzer.batches import json_message
-from analyzer.recording import _raw_message
+from analyzer.recording.reader import _raw_message
+from analyzer.session.batches import json_message
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from traffic import can_frames

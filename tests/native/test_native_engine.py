@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from native_core import needs_native
 
-from analyzer import native
 from analyzer.cli import main
+from analyzer.session import engine as native
 
 ROOT = Path(__file__).resolve().parents[2]
 SERIAL = ROOT / "captures" / "serial_session.bin"

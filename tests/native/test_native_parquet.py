@@ -1,5 +1,5 @@
 """``eg2scope decode --format parquet`` on the native core (native/src/arrow.rs builds the Arrow
-columns, analyzer/native_parquet.py hands them to ``ParquetRecordWriter.write_parsed``) against
+columns, analyzer/parquet/native.py hands them to ``ParquetRecordWriter.write_parsed``) against
 the Python engine (JSONL parsed by Arrow): both must write Parquet that reads back to equal
 tables, schema and column metadata included, with the same stderr and exit code.
 
@@ -44,7 +44,7 @@ from test_native_differential import (  # the same inputs and strategies
     write,
 )
 
-from analyzer import native_parquet
+from analyzer.parquet import native as native_parquet
 
 __all__ = ["work"]  # the fixture, shared
 

@@ -1,5 +1,6 @@
-"""A session on CAN input decodes and tracks with the native core (``analyzer/batches.py``): the
-same listener calls, records, state samples, JSONL and MCAP messages as with the Python engine.
+"""A session on CAN input decodes and tracks with the native core
+(``analyzer/session/batches.py``): the same listener calls, records, state samples, JSONL and
+MCAP messages as with the Python engine.
 Each test runs one input through a session twice, ``engine="python"`` and ``engine="native"``."""
 
 from __future__ import annotations
@@ -15,12 +16,12 @@ import pytest
 from mcap.reader import make_reader
 from native_core import needs_native
 
-from analyzer.batches import NativeCanDecoding, session_engine
-from analyzer.listener import Listener
 from analyzer.model import ERROR, Item, SourceEvent, StateSample
-from analyzer.pipeline import Decoding
-from analyzer.recording import McapRecorder
-from analyzer.session import Session, SessionOptions
+from analyzer.recording.reader import McapRecorder
+from analyzer.session.batches import NativeCanDecoding, session_engine
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session, SessionOptions
+from analyzer.session.stage import Decoding
 from analyzer.sources.capture import CanLogReader
 from analyzer.sources.source import CaptureSource, Source
 from decoders.model import CanFrame, Record

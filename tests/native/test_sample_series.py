@@ -1,5 +1,5 @@
-"""``SampleBatch.series(fields)`` against the Python reference, ``analyzer.batches.sample_series``
-given a plain list of the same samples (the Python path).
+"""``SampleBatch.series(fields)`` against the Python reference,
+``analyzer.session.batches.sample_series`` given a plain list of the same samples (the Python path).
 
 The groups must be equal with identical types, recursively (an int is not a float or a bool,
 ``-0.0`` is not ``0.0``, a list is not a tuple): the same groups in the same order, the same
@@ -26,11 +26,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from native_core import skip_or_fail, why_not
 
-from analyzer import native
-from analyzer.batches import sample_series
 from analyzer.model import StateSample
-from analyzer.pipeline import Decoding
-from analyzer.tracker import VALUE_KEYS, Tracker
+from analyzer.session import engine as native
+from analyzer.session.batches import sample_series
+from analyzer.session.stage import Decoding
+from analyzer.session.tracker import VALUE_KEYS, Tracker
 from decoders.model import EG2_SERIAL, MODBUS_RTU, Record
 
 if why := why_not():

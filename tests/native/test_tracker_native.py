@@ -1,10 +1,10 @@
 """The native state tracker (``analyzer._native.Tracker``, native/src/tracker.rs) against the
-Python one (analyzer/tracker.py): the same records folded by both must give equal state samples
-(dataclass equality, and the same key order in ``changed`` and ``values``), byte-identical
+Python one (analyzer/session/tracker.py): the same records folded by both must give equal state
+samples (dataclass equality, and the same key order in ``changed`` and ``values``), byte-identical
 ``messages()`` (``orjson.dumps(sample.to_dict(), default=json_default)``), the same times and
 keys, and equal device states, batch after batch.
 
-Records come from the Python decoders (analyzer.pipeline.Decoding) fed realistic traffic
+Records come from the Python decoders (analyzer.session.stage.Decoding) fed realistic traffic
 (tests/benchmarks/traffic.py) on several buses, with what real buses add: out-of-range readings,
 writes of read-only registers, error frames, frames with no time, requests never answered (the
 pairer's ``unanswered`` flag); Modbus and serial traffic too (the Python tracker folds every
@@ -28,10 +28,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from native_core import skip_or_fail, why_not
 
-from analyzer import native
 from analyzer.model import Item, StateSample, json_default
-from analyzer.pipeline import Decoding
-from analyzer.tracker import VALUE_KEYS, DeviceState, Tracker
+from analyzer.session import engine as native
+from analyzer.session.stage import Decoding
+from analyzer.session.tracker import VALUE_KEYS, DeviceState, Tracker
 from decoders import build as b
 from decoders.eg2_serial import Cmd
 from decoders.flags import UNANSWERED

@@ -15,7 +15,7 @@ from mcap.records import ChunkIndex, Message
 from mcap_checks import assert_time_ordered
 
 from analyzer.model import INFO, Item, SourceEvent
-from analyzer.recording import (
+from analyzer.recording.reader import (
     McapCaptureReader,
     McapRecorder,
     _Recording,

@@ -16,7 +16,7 @@ import pytest
 from analyzer.cli import main
 from analyzer.errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_USAGE, UsageError
 from analyzer.model import Item
-from analyzer.recording import (
+from analyzer.recording.reader import (
     McapCaptureReader,
     McapRecorder,
     read_events,

@@ -12,12 +12,11 @@ import pytest
 from mcap.reader import make_reader
 from mcap_checks import assert_time_ordered, mcap_messages
 
-from analyzer import __version__, recording
+from analyzer import __version__
 from analyzer.errors import UsageError
-from analyzer.listener import Listener, make_listener
 from analyzer.model import ERROR, INFO, WARNING, Item, SourceEvent, StateSample
-from analyzer.pipeline import Decoding
-from analyzer.recording import (
+from analyzer.recording import reader as recording
+from analyzer.recording.reader import (
     McapCaptureReader,
     McapRecorder,
     read_events,
@@ -26,10 +25,12 @@ from analyzer.recording import (
     read_states,
     topic_part,
 )
-from analyzer.session import Session
+from analyzer.session.listener import Listener, make_listener
+from analyzer.session.session import Session
+from analyzer.session.stage import Decoding
+from analyzer.session.tracker import Tracker
 from analyzer.sources.capture import open_capture
 from analyzer.sources.source import CaptureSource
-from analyzer.tracker import Tracker
 from decoders import build as b
 from decoders.model import CanFrame, Chunk, Record
 

@@ -15,8 +15,8 @@ from taps.tap_helpers import Pty
 
 from analyzer.cli import main
 from analyzer.model import INFO, WARNING, Item, SourceEvent
-from analyzer.recording import McapCaptureReader, McapRecorder, read_events
-from analyzer.session import live_session
+from analyzer.recording.reader import McapCaptureReader, McapRecorder, read_events
+from analyzer.session.session import live_session
 from analyzer.sources.live import wait_open
 from analyzer.sources.serial_tap import SerialTap
 from decoders import build as b

@@ -15,14 +15,14 @@ from pathlib import Path
 import pytest
 from mcap_checks import assert_time_ordered
 
-from analyzer.recording import McapCaptureReader
+from analyzer.recording.reader import McapCaptureReader
 from decoders.model import CanFrame, Chunk
 
 ROOT = Path(__file__).resolve().parents[2]
 
 CHILD = r"""
 import sys, time
-from analyzer.recording import McapRecorder
+from analyzer.recording.reader import McapRecorder
 from analyzer.model import Item
 from decoders.model import CanFrame, Chunk
 

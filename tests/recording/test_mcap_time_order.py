@@ -14,9 +14,9 @@ from mcap.reader import make_reader
 from mcap_checks import assert_time_ordered, mcap_messages
 
 from analyzer.model import INFO, WARNING, Item, SourceEvent
-from analyzer.pipeline import Decoding
-from analyzer.recording import McapCaptureReader, McapRecorder, read_records
-from analyzer.tracker import Tracker
+from analyzer.recording.reader import McapCaptureReader, McapRecorder, read_records
+from analyzer.session.stage import Decoding
+from analyzer.session.tracker import Tracker
 from decoders import build as b
 from decoders.model import CanFrame, Chunk
 

@@ -1,4 +1,4 @@
-"""The recorder's MCAP writer (``analyzer.mcap_writer``) writes the file mcap's own ``Writer``
+"""The recorder's MCAP writer (``analyzer.recording.writer``) writes the file mcap's own ``Writer``
 writes message by message, byte for byte, while adding messages a batch at a time; and the
 recorder's clock conversion gives every message its log time without a Python step per message
 when the times are plain numbers."""
@@ -20,8 +20,8 @@ from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from analyzer.mcap_writer import McapWriter
-from analyzer.recording import _LAST_NS, _log_times, _ns
+from analyzer.recording.reader import _LAST_NS, _log_times, _ns
+from analyzer.recording.writer import McapWriter
 
 LIBRARY_COMPRESSION = {
     "": CompressionType.NONE,

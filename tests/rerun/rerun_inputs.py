@@ -14,9 +14,9 @@ from typing import Any
 import can
 
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.listener import Listener
 from analyzer.model import StateSample
-from analyzer.recording import McapRecorder
+from analyzer.recording.reader import McapRecorder
+from analyzer.session.listener import Listener
 from decoders import build as b
 from decoders.eg2_serial import Cmd
 from decoders.model import Record

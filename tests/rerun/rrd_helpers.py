@@ -115,7 +115,7 @@ VIEW_DRAWS = {
     "StateTimeline": "StateChange:state",
     "TextLog": "TextLog:text",
 }
-# the viewer's shared time axis of linked plots (analyzer.rerun_blueprint.SHARED_AXIS_VIEW)
+# the viewer's shared time axis of linked plots (analyzer.plot.blueprint.SHARED_AXIS_VIEW)
 SHARED_AXIS = "/view/5c0dca6a-e63f-9cf7-f657-2602590474cc/TimeAxis"
 
 

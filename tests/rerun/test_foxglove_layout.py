@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from rerun_inputs import CAPTURES, ROOT
 
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.recording import McapRecorder
+from analyzer.recording.reader import McapRecorder
 
 LAYOUT = ROOT / "docs" / "foxglove-layout.json"
 PATH = re.compile(r"^(/state/[^.]+)\.(\w+)$")

@@ -18,13 +18,13 @@ import pytest
 from rerun_inputs import CAPTURES, Collector, faults_can, write_candump
 from rrd_helpers import read_rrd
 
-from analyzer import native
-from analyzer.batches import native_session_available, records_jsonl
 from analyzer.cli import main
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.listener import Listener
-from analyzer.rerun_logs import log_rows
-from analyzer.sinks.rerun import RerunListener
+from analyzer.plot.listener import RerunListener
+from analyzer.plot.logs import log_rows
+from analyzer.session import engine as native
+from analyzer.session.batches import native_session_available, records_jsonl
+from analyzer.session.listener import Listener
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from traffic import warning_can_frames

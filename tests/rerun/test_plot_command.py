@@ -24,10 +24,10 @@ import pytest
 from rerun_inputs import CAPTURES, CASES, INPUTS, ROOT, TIMED, Collector
 from rrd_helpers import blueprint_text, read_rrd, views
 
-from analyzer.batches import native_session_available
 from analyzer.cli import main
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.rerun_target import (
+from analyzer.plot.listener import RerunListener
+from analyzer.plot.target import (
     CONNECT,
     SAVE,
     SERVE_WEB,
@@ -40,7 +40,7 @@ from analyzer.rerun_target import (
     rerun_listener,
     rrd_name,
 )
-from analyzer.sinks.rerun import RerunListener
+from analyzer.session.batches import native_session_available
 from decoders import build as b
 from decoders.eg2_serial import Cmd
 from decoders.registers import opening_mm

@@ -11,7 +11,8 @@ from contextlib import redirect_stderr
 from pathlib import Path
 from typing import Any
 
-from analyzer import cli, native
+from analyzer import cli
+from analyzer.session import engine as native
 from analyzer.sources.can_files import open_can_file
 from decoders.model import CanFrame
 

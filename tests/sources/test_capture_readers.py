@@ -40,8 +40,8 @@ CAN_LOG = "analyzer.sources.capture:CanLogReader"
         ("trace.csv.gz", CAN_LOG),
         ("trace.mf4", CAN_LOG),
         ("run.2024.05.log", CAN_LOG),
-        ("run.mcap", "analyzer.recording:McapCaptureReader"),
-        ("RUN.MCAP", "analyzer.recording:McapCaptureReader"),
+        ("run.mcap", "analyzer.recording.reader:McapCaptureReader"),
+        ("RUN.MCAP", "analyzer.recording.reader:McapCaptureReader"),
         ("dump.bin.gz", "analyzer.sources.capture:GzipBytesReader"),
         ("dump.gz", "analyzer.sources.capture:GzipBytesReader"),
         ("dump.bin", "analyzer.sources.capture:RawBytesReader"),
@@ -63,12 +63,12 @@ def test_compressed_kinds_that_cannot_be_read_compressed(tmp_path: Path, name: s
 
 def test_registry_is_lazy_names() -> None:
     assert all(":" in target for target in CAPTURE_READERS.values())
-    assert CAPTURE_READERS[".mcap"] == "analyzer.recording:McapCaptureReader"
+    assert CAPTURE_READERS[".mcap"] == "analyzer.recording.reader:McapCaptureReader"
     code = (
         "import sys\n"
         "from analyzer.sources.capture import open_capture\n"
         "open_capture(sys.argv[1]).close()\n"
-        "print('analyzer.recording' in sys.modules, 'mcap' in sys.modules)\n"
+        "print('analyzer.recording.reader' in sys.modules, 'mcap' in sys.modules)\n"
     )
     log = ROOT / "tests" / "sources" / "test_capture_readers.py"  # any file: read as bytes
     out = subprocess.run(
@@ -184,7 +184,7 @@ def _open_error(path: Path) -> str:
         except OSError as exc:
             return f"{type(exc).__name__}|{exc}"
         return "opened"
-    import analyzer.recording  # noqa: F401  (imported here: the child cannot read /root)
+    import analyzer.recording.reader  # noqa: F401  (imported here: the child cannot read /root)
 
     r, w = os.pipe()
     pid = os.fork()
@@ -236,7 +236,7 @@ def test_a_garbled_asc_frame_line_is_damage_where_it_is(
     """A frame line python-can's ASC reader skips in silence is reported with its line number,
     exit 3, and every other frame is decoded (both engines read .asc through python-can)."""
     if engine == "native":
-        from analyzer.native import available
+        from analyzer.session.engine import available
 
         if not available():
             pytest.skip("the native core is not built")

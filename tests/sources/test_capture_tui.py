@@ -17,7 +17,7 @@ import pytest
 from capture_helpers import CAN_LOG, ROOT, sample_frames, write_layout
 
 from analyzer.commands.common import CaptureOptions, byte_protocol, open_reader
-from analyzer.session import Session, SessionOptions
+from analyzer.session.session import Session, SessionOptions
 from analyzer.sources.can_message import frame_to_message
 from analyzer.tui.app import Eg2ScopeApp, SessionPlan
 from analyzer.tui.replay import ReplaySource

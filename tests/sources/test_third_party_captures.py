@@ -19,7 +19,8 @@ from typing import Any
 import can
 import pytest
 
-from analyzer import cli, native
+from analyzer import cli
+from analyzer.session import engine as native
 from analyzer.sources.can_files import PythonCanFileReader, open_can_file
 from analyzer.sources.can_message import message_to_frame
 

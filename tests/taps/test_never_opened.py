@@ -16,9 +16,9 @@ import pytest
 from tap_helpers import Pty
 
 from analyzer.errors import SourceError
-from analyzer.listener import Listener
 from analyzer.model import SourceEvent
-from analyzer.session import Session
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.live import Tap, TapQueue
 from analyzer.sources.serial_tap import SerialPairTap, SerialTap

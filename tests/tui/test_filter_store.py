@@ -7,7 +7,7 @@ import pytest
 from conftest import CAPTURES
 
 from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.listener import Listener
+from analyzer.session.listener import Listener
 from analyzer.tui.aggregates import HISTOGRAM_BINS, Aggregates, latency_stats
 from analyzer.tui.export import raw_item
 from analyzer.tui.filter import FilterError, parse

@@ -1,4 +1,4 @@
-"""The TUI's time order across buses (``analyzer.tui.timeorder.TimeMerge``) on records the
+"""The TUI's time order across buses (``analyzer.session.timeorder.TimeMerge``) on records the
 real decoders make: a serial frame finished after CAN frames captured meanwhile is put back in
 its place, a bus still detecting its protocol holds the others, a quiet bus does not, and each
 bus keeps its own stream order."""
@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 
 from analyzer.model import Item
-from analyzer.pipeline import Decoding
-from analyzer.tui.timeorder import TimeMerge
+from analyzer.session.stage import Decoding
+from analyzer.session.timeorder import TimeMerge
 from decoders import build as b
 from decoders.eg2_serial import Cmd
 from decoders.model import EG2_SERIAL, Chunk, Record

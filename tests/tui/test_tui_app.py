@@ -20,7 +20,7 @@ from textual.widgets._footer import FooterKey
 
 from analyzer.commands.common import CaptureOptions, open_reader
 from analyzer.commands.tui import finish, summary_line
-from analyzer.session import Session, SessionOptions
+from analyzer.session.session import Session, SessionOptions
 from analyzer.sim.rig import DemoRig
 from analyzer.tui.aggregates import LATENCY_KEEP, Aggregates
 from analyzer.tui.app import Eg2ScopeApp, SessionPlan

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from conftest import SIZES, capture_app, driving, eg2scope, until
 
-from analyzer import native
-from analyzer.batches import native_session_available
+from analyzer.session import engine as native
+from analyzer.session.batches import native_session_available
 from analyzer.tui.layout import row_layout
 from analyzer.tui.rows import ELLIPSIS, plain_row
 

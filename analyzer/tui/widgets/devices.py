@@ -25,7 +25,7 @@ from textual.strip import Strip
 from decoders.registers import FAULT_BITS
 
 from ...model import derived
-from ...tracker import READINGS
+from ...session.tracker import READINGS
 from ..aggregates import DeviceKey, LatencyStats
 from ..messages import DeviceRow
 

@@ -23,9 +23,9 @@ import orjson
 
 from decoders.model import CanFrame, Record
 
-from .model import StateSample, json_default
-from .native import ENGINES, _native
-from .pipeline import Decoding
+from ..model import StateSample, json_default
+from .engine import ENGINES, _native
+from .stage import Decoding
 from .tracker import Tracker
 
 # the native batch classes (an empty tuple where the core is not built: isinstance is False)

@@ -1,6 +1,6 @@
 """The Rerun entity contract (docs/rerun.md): entity paths, timelines, series names and colours,
-the state lanes' configuration. The listener (``analyzer/sinks/rerun.py``) logs these entities and
-the blueprint (``analyzer/rerun_blueprint.py``) lays them out; both read them from here only.
+the state lanes' configuration. The listener (``analyzer/plot/listener.py``) logs these entities and
+the blueprint (``analyzer/plot/blueprint.py``) lays them out; both read them from here only.
 
 ```
 /<bus>/<device>/opening_mm/measured   /opening_mm/target       scalars (mm)

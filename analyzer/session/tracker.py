@@ -21,7 +21,7 @@ from decoders.flags import OUT_OF_RANGE, UNANSWERED
 from decoders.model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
 from decoders.registers import BY_NAME
 
-from .model import StateSample, derived
+from ..model import StateSample, derived
 
 # register name -> state field
 REGISTER_FIELDS: Final[dict[str, str]] = {

@@ -46,16 +46,16 @@ import orjson
 from decoders.model import EG2_SERIAL, CanFrame, Chunk, Record
 from decoders.registry import detect_protocol
 
-from .errors import EXIT_OK
+from ..errors import EXIT_OK
+from ..model import Item
+from ..sources.can_files import CandumpReader, is_gzip
+from ..sources.capture import RawBytesReader, can_bus_name
 from .listener import Listener
-from .model import Item
-from .pipeline import Decoding
-from .sources.can_files import CandumpReader, is_gzip
-from .sources.capture import RawBytesReader, can_bus_name
+from .stage import Decoding
 
 if TYPE_CHECKING:
-    from .commands.common import CaptureOptions
-    from .sources.capture import CaptureReader
+    from ..commands.common import CaptureOptions
+    from ..sources.capture import CaptureReader
 
 # Part sizes and warm-ups per kind of input. A candump log carries time: its warm-up covers
 # the longest a request may wait for its answer (a save, 2 s) on a busy bus. A raw dump has
@@ -235,10 +235,10 @@ def _can_frames(part: Part) -> Iterator[tuple[str, CanFrame]]:
 
 def _output(fmt: str, out: IO[bytes]) -> Listener:
     if fmt == "jsonl":
-        from .sinks.jsonl import JsonlListener
+        from ..sinks.jsonl import JsonlListener
 
         return JsonlListener(out)
-    from .sinks.csv import CsvListener
+    from ..sinks.csv import CsvListener
 
     return CsvListener(io.TextIOWrapper(out, encoding="utf-8", newline=""), header=False)
 
@@ -468,7 +468,7 @@ def decode_in_parallel(
     exit code. None when the file is not split (the caller decodes it in one piece); a
     JoinError when the split failed after some output was written (the caller goes on in one
     piece from its ``resume``)."""
-    from .commands.common import byte_protocol
+    from ..commands.common import byte_protocol
 
     path = Path(opts.path)
     kind = reader_kind(reader)
@@ -483,7 +483,7 @@ def decode_in_parallel(
     binary: IO[bytes] = out if fmt == "jsonl" else out.buffer  # type: ignore[attr-defined]
     header = b""
     if fmt == "csv":
-        from .sinks.csv import CsvListener
+        from ..sinks.csv import CsvListener
 
         text = io.StringIO()
         CsvListener(text)  # writes the header
@@ -510,7 +510,7 @@ def decode_in_parallel(
 def resumed(listener: Listener, resume: int) -> Listener:
     """``listener`` given only the records from ``resume`` on (a one-piece decode going on
     where a split decode's written output ends)."""
-    from .commands.common import FilteredListener
+    from ..commands.common import FilteredListener
 
     return FilteredListener(listener, lambda rec: _position(rec) >= resume)
 
@@ -522,7 +522,7 @@ class _PartProgress:
         self.bar: Any = None
         self.reader = reader
         if enabled and sys.stderr.isatty():
-            from .commands.common import ProgressListener
+            from ..commands.common import ProgressListener
 
             self.bar = ProgressListener(reader)
 

@@ -28,7 +28,7 @@ from typing import Any, Final
 import rerun as rr
 import rerun.blueprint as rrb
 
-from . import rerun_entities as ent
+from . import entities as ent
 
 MAX_COLUMNS: Final = 4  # above this many grippers, a tab per bus
 LIVE_WINDOW_S: Final = 10.0

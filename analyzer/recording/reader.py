@@ -87,8 +87,11 @@ from mcap.writer import LIBRARY_IDENTIFIER
 from decoders.model import EG2_SERIAL, MODBUS_RTU, CanFrame, Record
 from decoders.model import Chunk as ByteChunk
 
-from . import __version__
-from .batches import (
+from .. import __version__
+from ..errors import UsageError
+from ..lifecycle import Closing
+from ..model import ERROR, WARNING, Item, SourceEvent, StateSample, json_default
+from ..session.batches import (
     can_raw_messages,
     column,
     json_message,
@@ -97,13 +100,10 @@ from .batches import (
     sample_messages,
     with_problems,
 )
-from .errors import UsageError
-from .lifecycle import Closing
-from .listener import Listener
-from .mcap_writer import MAGIC, McapWriter
-from .model import ERROR, WARNING, Item, SourceEvent, StateSample, json_default
-from .sources.capture import CaptureReader
-from .sources.naming import BUS_BY_PROTOCOL
+from ..session.listener import Listener
+from ..sources.capture import CaptureReader
+from ..sources.naming import BUS_BY_PROTOCOL
+from .writer import MAGIC, McapWriter
 
 # -- layout ----------------------------------------------------------------------------------------
 

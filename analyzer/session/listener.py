@@ -20,7 +20,7 @@ from typing import Any
 
 from decoders.model import Record
 
-from .model import Item, SourceEvent, StateSample
+from ..model import Item, SourceEvent, StateSample
 
 
 class Listener(ABC):
@@ -35,7 +35,7 @@ class Listener(ABC):
     @abstractmethod
     def on_records(self, records: Sequence[Record]) -> None:
         """Decoded records, in stream order: a list, or the native core's lazy ``RecordBatch``
-        (a sequence of the same records; ``analyzer.batches`` reads either in bulk)."""
+        (a sequence of the same records; ``analyzer.session.batches`` reads either in bulk)."""
 
     def on_states(self, samples: Sequence[StateSample]) -> None:
         """State samples (one per record that set a gripper's state), in stream order."""
@@ -63,10 +63,10 @@ LISTENERS: dict[str, str] = {
     "text": "analyzer.sinks.text:TextListener",
     "jsonl": "analyzer.sinks.jsonl:JsonlListener",
     "csv": "analyzer.sinks.csv:CsvListener",
-    "parquet": "analyzer.sinks.parquet:ParquetListener",
+    "parquet": "analyzer.parquet.writer:ParquetListener",
     "stats": "analyzer.sinks.stats:StatsListener",
-    "mcap": "analyzer.recording:McapRecorder",
-    "rerun": "analyzer.sinks.rerun:RerunListener",
+    "mcap": "analyzer.recording.reader:McapRecorder",
+    "rerun": "analyzer.plot.listener:RerunListener",
 }
 
 

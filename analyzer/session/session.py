@@ -35,13 +35,13 @@ from typing import Any
 
 from decoders.model import Record
 
-from . import interrupts
+from .. import interrupts
+from ..model import ERROR, SourceEvent
+from ..sources.live import CLOSED, LOST, Tap
+from ..sources.source import Batch, LiveSource, Source
 from .batches import NativeCanDecoding, error_count, session_engine
 from .listener import Listener
-from .model import ERROR, SourceEvent
-from .sources.live import CLOSED, LOST, Tap
-from .sources.source import Batch, LiveSource, Source
-from .tui.timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
+from .timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ class SessionOptions:
     named serial buses (10 bits / baud), to time frames inside a read; ``duration``: stop after
     this many seconds of wall time (None: run until the source ends or Ctrl-C); ``engine``:
     "auto" (the native core for CAN input where it is built), "python" or "native"
-    (analyzer/batches.py)."""
+    (analyzer/session/batches.py)."""
 
     protocol: str | None = None
     per_bus: dict[str, str] = field(default_factory=dict)

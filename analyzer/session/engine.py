@@ -11,10 +11,11 @@ that), so it is used automatically where it applies:
 - the capture is a candump log (any layout candump writes, plain or ``.gz``) or a raw byte
   dump (``.gz`` too), a regular file (a FIFO cannot be opened twice);
 - ``--format`` is jsonl, csv, text or parquet (the core builds the Arrow columns:
-  analyzer/native_parquet.py), and there is no ``--speed`` (a timed replay).
+  analyzer/parquet/native.py), and there is no ``--speed`` (a timed replay).
 
 Other CAN captures (PCAN traces, python-can's formats, CAN recordings) are read in Python and
-decoded by the session, natively where the core is built (analyzer/batches.py); a session on a
+decoded by the session, natively where the core is built
+(analyzer/session/batches.py); a session on a
 candump log (``plot``, ``tui``) gets its frames from the core's reader (``candump_frames``)
 when it decodes natively and no listener wants the raw items. Byte streams of
 recordings, live taps and the TUI stay with the Python decoders, the readable reference.
@@ -36,24 +37,25 @@ from pathlib import Path
 from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any
 
-from .errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
-from .outfile import OutputError
-from .sources.can_files import CandumpReader
-from .sources.capture import CanLogReader, CaptureReader, GzipBytesReader, RawBytesReader
+from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
+from ..outfile import OutputError
+from ..sources.can_files import CandumpReader
+from ..sources.capture import CanLogReader, CaptureReader, GzipBytesReader, RawBytesReader
 
 if TYPE_CHECKING:
-    from .commands.common import CaptureOptions
+    from ..commands.common import CaptureOptions
 
 ENGINES = ("auto", "python", "native")
 FORMATS = ("jsonl", "csv", "text")
 _I64_MAX = (1 << 63) - 1
 
+CORE = "analyzer._native"  # the extension's name (pyproject.toml: setuptools-rust target)
 _native: ModuleType | None
 try:
-    _native = importlib.import_module(f"{__package__}._native")
+    _native = importlib.import_module(CORE)
 except ModuleNotFoundError as exc:
     _native = None
-    if exc.name == f"{__package__}._native":
+    if exc.name == CORE:
         WHY_NOT = "not built: no Rust toolchain at install time, or its build failed"
     else:
         WHY_NOT = f"not loadable: {exc}"
@@ -131,7 +133,7 @@ def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: boo
                 raise UsageError(f"--engine native: {why}; use --engine python or auto")
             return None  # the Python engine, or the session's native CAN decoding
         if colour is None:  # stdout: coloured as the text listener would decide
-            from .sinks.text import use_colour
+            from ..sinks.text import use_colour
 
             colour = use_colour(sys.stdout)
         assert _native is not None  # ineligible() said so
@@ -153,7 +155,7 @@ def open_for(args: Any, opts: CaptureOptions, reader: CaptureReader, colour: boo
 
 def _session_decodes(reader: CaptureReader) -> bool:
     """Whether the session decodes this capture natively when the core's own decode cannot:
-    CAN frames read in Python (analyzer/batches.py `session_engine`)."""
+    CAN frames read in Python (analyzer/session/batches.py `session_engine`)."""
     from .batches import native_session_available
 
     return reader.kind == "can" and native_session_available()
@@ -175,11 +177,11 @@ def _text_stdout_differs() -> str:
 def open_run(opts: CaptureOptions, fmt: str, colour: bool, absolute_time: bool) -> Any:
     """A native decode (iterate it for output bytes). ``_native.Unsupported`` when the core
     does not handle this input (the Python engine decodes it); OSError: it cannot be opened."""
-    from .commands.common import byte_protocol
+    from ..commands.common import byte_protocol
 
     assert _native is not None
     if fmt == "parquet":  # records as Arrow columns (native_parquet.py)
-        from .native_parquet import open_run as open_arrow_run
+        from ..parquet.native import open_run as open_arrow_run
 
         return open_arrow_run(
             _native,
@@ -220,7 +222,7 @@ def _progress(path: str, run: Any, show: bool) -> Iterator[Any]:
     if not (show and sys.stderr.isatty()):
         yield None
         return
-    from .commands.common import ProgressListener
+    from ..commands.common import ProgressListener
 
     bar = ProgressListener(_RunReader(path, run))  # type: ignore[arg-type]
     try:
@@ -245,7 +247,7 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
         with signals_as_interrupt(), _progress(path, run, progress) as bar:
             try:
                 if isinstance(run, getattr(_native, "ArrowRun", ())):  # --format parquet
-                    from .native_parquet import write
+                    from ..parquet.native import write
 
                     write(run, binary, None if bar is None else lambda: _tick(bar, run))
                 elif fd is not None:  # the core writes each batch itself: no copy through Python

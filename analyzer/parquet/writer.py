@@ -1,4 +1,4 @@
-"""Parquet output: the records as typed columns (analyzer/parquet_schema.py), for pandas, polars
+"""Parquet output: the records as typed columns (analyzer/parquet/schema.py), for pandas, polars
 and DuckDB.
 
 One code path for both engines: records arrive as JSONL bytes (the native core's batches, or
@@ -35,9 +35,9 @@ import pyarrow.parquet as pq
 
 from decoders.model import Record
 
-from ..batches import records_jsonl
-from ..listener import Listener
-from ..parquet_schema import (
+from ..session.batches import records_jsonl
+from ..session.listener import Listener
+from .schema import (
     FAMILY,
     FLOAT,
     INT,

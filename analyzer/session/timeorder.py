@@ -35,7 +35,7 @@ from typing import Any, Final
 
 from decoders.model import Record
 
-from ..batches import column
+from .batches import column
 
 CAPTURE_HOLD_S: Final = 2.0  # capture seconds a quiet bus may hold the others back
 LIVE_HOLD_S: Final = 0.3  # live: about a batching window and a serial line's idle gap

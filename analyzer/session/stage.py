@@ -16,7 +16,7 @@ from decoders.model import EG2_SERIAL, CanFrame, Chunk, Record
 from decoders.pairing import Pairer
 from decoders.registry import STREAM_DECODERS, detect_protocol
 
-from .model import Item, SourceEvent
+from ..model import Item, SourceEvent
 
 DETECT_BYTES = 4096  # bytes of a stream looked at before choosing its protocol
 

@@ -13,17 +13,17 @@ from typing import IO, Any
 
 from decoders.model import Record
 
-from .. import __version__
-from ..errors import UsageError
-from ..listener import Listener, make_listener
-from ..model import SourceEvent
-from ..outfile import check_new_file
-from ..session import Session, SessionOptions
-from ..sinks.text import format_event, use_colour
-from ..sources.live import Tap
-from ..sources.naming import BUS_BY_PROTOCOL
-from ..sources.source import LiveSource
-from .common import exit_code, positive_float, positive_int
+from . import __version__
+from .commands.common import exit_code, positive_float, positive_int
+from .errors import UsageError
+from .model import SourceEvent
+from .outfile import check_new_file
+from .session.listener import Listener, make_listener
+from .session.session import Session, SessionOptions
+from .sinks.text import format_event, use_colour
+from .sources.live import Tap
+from .sources.naming import BUS_BY_PROTOCOL
+from .sources.source import LiveSource
 
 # a live command's own listeners: a list, or what makes them once the taps are open
 Extra = list[Listener] | Callable[[], list[Listener]] | None
@@ -229,7 +229,7 @@ def _outputs(
         listeners.append(make_listener(show, sys.stdout.buffer))
     if args.output:
         listeners.append(recorder(args.output, taps))
-    from ..rerun_target import rerun_listener
+    from .plot.target import rerun_listener
 
     rerun = rerun_listener(args, source=args.output)
     if rerun is not None:

@@ -21,7 +21,7 @@ import pyarrow as pa
 import rerun as rr
 from rerun.chunk import Chunk
 
-from ..rerun_entities import CAPTURE_TIME, FRAME
+from .entities import CAPTURE_TIME, FRAME
 
 _INDEX: Final = {
     CAPTURE_TIME: pa.field(

@@ -1,10 +1,10 @@
 """``eg2scope decode --format parquet`` on the native core: the core builds the Arrow columns of
 its records itself (native/src/arrow.rs, in ``PARSE_SCHEMA``'s layout: no JSON), and they go to
-``ParquetRecordWriter.write_parsed`` (analyzer/sinks/parquet.py), the Python engine's own
+``ParquetRecordWriter.write_parsed`` (analyzer/parquet/writer.py), the Python engine's own
 flattening and writing: the same Parquet from both engines (tests/native/test_native_parquet.py).
 
 The columns are described to the core from ``PARSE_SCHEMA`` at the start of a run (one home for
-them: analyzer/parquet_schema.py); the core mirrors ``_line_by_line``/``_split_fields`` of
+them: analyzer/parquet/schema.py); the core mirrors ``_line_by_line``/``_split_fields`` of
 the Python path for each record, ``other_fields`` included. Batches are Parquet row groups.
 """
 
@@ -15,9 +15,9 @@ from typing import IO, Any, Final
 
 import pyarrow as pa
 
-from .interrupts import noted_interrupts
-from .parquet_schema import FAMILY, OTHER_FIELDS, PARSE_SCHEMA, VALUES_KEY, parse_key
-from .sinks.parquet import ROW_GROUP_ROWS, ParquetRecordWriter
+from ..interrupts import noted_interrupts
+from .schema import FAMILY, OTHER_FIELDS, PARSE_SCHEMA, VALUES_KEY, parse_key
+from .writer import ROW_GROUP_ROWS, ParquetRecordWriter
 
 # the Arrow types the core builds, by the names it knows them
 _TYPES: Final = {

@@ -22,8 +22,8 @@ from decoders.flags import DEVICE_FAULT, ESTIMATED_TIME, FOREIGN, UNANSWERED
 from decoders.modbus_pdu import READ_HOLDING
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
 
-from .batches import RecordBatch
-from .native import _native
+from ..session.batches import RecordBatch
+from ..session.engine import _native
 
 # requests that only read (polls), by (protocol, code): the readings are plotted, the polls
 # are not listed as commands

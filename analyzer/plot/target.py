@@ -31,10 +31,10 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Final
 from urllib.parse import quote
 
-from .errors import UsageError
+from ..errors import UsageError
 
 if TYPE_CHECKING:
-    from .listener import Listener
+    from ..session.listener import Listener
 
 APPLICATION_ID: Final = "eg2scope"
 SAVE: Final = "save"
@@ -152,7 +152,7 @@ def rerun_listener(
     text = getattr(args, "rerun", None)
     if text is None:
         return None
-    from .sinks.rerun import RerunListener
+    from .listener import RerunListener
 
     return RerunListener(parse_target(text, source), live=live)
 
@@ -256,7 +256,7 @@ class RerunOutput:
         the browser reads it from the server), then stop the server."""
         if self.server is None:
             return
-        from .session import signals_as_interrupt  # SIGTERM and SIGHUP as Ctrl-C
+        from ..session.session import signals_as_interrupt  # SIGTERM and SIGHUP as Ctrl-C
 
         try:
             with signals_as_interrupt():

@@ -1,6 +1,6 @@
 """The Rerun listener: every state sample of a session plotted on two timelines, with the
 commands, errors, fault marks and bus health around them (the entity contract: docs/rerun.md,
-its names: ``analyzer/rerun_entities.py``).
+its names: ``analyzer/plot/entities.py``).
 
 Values are buffered and sent as typed columns in batches (``rerun_batch.py``: one Arrow record
 batch for the entities that share their rows, one chunk per entity; never one ``log`` call per
@@ -38,14 +38,14 @@ import pyarrow as pa
 
 from decoders.model import Record
 
-from .. import rerun_entities as ent
-from ..batches import column, sample_series
-from ..listener import Listener
 from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
-from ..rerun_blueprint import Layout, blueprint
-from ..rerun_logs import log_rows
-from ..rerun_target import RerunOutput, RerunTarget, parse_target
-from .rerun_batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
+from ..session.batches import column, sample_series
+from ..session.listener import Listener
+from . import entities as ent
+from .batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
+from .blueprint import Layout, blueprint
+from .logs import log_rows
+from .target import RerunOutput, RerunTarget, parse_target
 
 NAN: Final = float("nan")  # no timestamp
 # a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
