@@ -14,10 +14,10 @@ from typing import IO, Any
 from decoders.model import Record
 
 from . import __version__
-from .commands.common import exit_code, positive_float, positive_int
 from .errors import UsageError
 from .model import SourceEvent
 from .outfile import check_new_file
+from .session.capture import exit_code
 from .session.listener import Listener, make_listener
 from .session.session import Session, SessionOptions
 from .sinks.text import format_event, use_colour
@@ -27,39 +27,6 @@ from .sources.source import LiveSource
 
 # a live command's own listeners: a list, or what makes them once the taps are open
 Extra = list[Listener] | Callable[[], list[Listener]] | None
-
-
-def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
-    """The options of a live session (its outputs and its end); a live command runs until it
-    is stopped, and a stop is a clean end (``errors.runs_until_stopped``)."""
-    parser.set_defaults(until_stopped=True)
-    parser.add_argument(
-        "--output",
-        "-o",
-        metavar="RUN.mcap",
-        required=record_required,
-        help="record raw input, decoded records, device state and events to this MCAP file "
-        "(an existing file is refused unless --force)",
-    )
-    parser.add_argument(
-        "--force",
-        action="store_true",
-        help="replace the -o file if it exists (without it, an existing file is a usage error)",
-    )
-    parser.add_argument(
-        "--duration",
-        type=positive_float,
-        metavar="S",
-        help="stop after S seconds (default: run until Ctrl-C)",
-    )
-    parser.add_argument(
-        "--queue-size",
-        type=positive_int,
-        default=200_000,
-        metavar="N",
-        help="items buffered between capture and decoding before drops are "
-        "counted (default 200000)",
-    )
 
 
 class StatusLine(Listener):
@@ -229,9 +196,9 @@ def _outputs(
         listeners.append(make_listener(show, sys.stdout.buffer))
     if args.output:
         listeners.append(recorder(args.output, taps))
-    from .plot.target import rerun_listener
+    from .plot.listener import rerun_listener
 
-    rerun = rerun_listener(args, source=args.output)
+    rerun = rerun_listener(getattr(args, "rerun", None), source=args.output)
     if rerun is not None:
         listeners.append(rerun)
     return listeners

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..live_runner import add_session_arguments, run_session
+from ..live_runner import run_session
 from ..sources.naming import UNNAMED
 from ..sources.serial_tap import SerialBridge
+from .common import add_session_arguments
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import (
     add_line_arguments,

@@ -9,25 +9,12 @@ import stat
 import sys
 from typing import IO, Any
 
-from decoders.registry import PROTOCOL_WORDS, short_name, valid_frames
-
-from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
-from ..outfile import OutputError, output_stream
-from ..session import engine as native
+from ..errors import UsageError
+from ..session.capture import DecodeOutput, open_reader, protocol_hint
+from ..session.decode_routes import decode_capture
+from ..session.engine import ENGINES
 from ..session.listener import Listener, make_listener
-from ..session.session import Session
-from ..session.stage import DETECT_BYTES
-from ..sources import sniff
-from ..sources.capture import CaptureReader, GzipBytesReader, RawBytesReader
-from .common import (
-    CaptureOptions,
-    add_input_arguments,
-    finish_capture,
-    non_negative_int,
-    open_reader,
-    report_empty,
-    run_capture,
-)
+from .common import add_input_arguments, capture_options, non_negative_int
 from .helptext import FILE_EXIT_STATUS, HelpFormatter, epilog
 
 FORMATS = ("text", "jsonl", "csv", "parquet")
@@ -95,7 +82,7 @@ def add_subparser(sub: Any) -> None:
     )
     parser.add_argument(
         "--engine",
-        choices=native.ENGINES,
+        choices=ENGINES,
         default="auto",
         help="auto: the native core where it applies (candump logs and raw dumps to jsonl, "
         "csv, text or parquet, byte-identical output; other CAN captures are read in Python "
@@ -131,38 +118,19 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             "--format parquet writes a binary file, not to a terminal: give -o FILE.parquet"
         )
-    opts = CaptureOptions.from_args(args)
+    opts = capture_options(args)
     if to_terminal:  # the records scrolling by show the progress; a bar would cut into them
         opts = dataclasses.replace(opts, progress=False)
     reader = open_reader(opts)  # opened first: a missing input must not touch the output
     hint = protocol_hint(opts, reader)
     if hint:
         print(f"eg2scope: {opts.path}: {hint}", file=sys.stderr)
-    nrun = native.open_for(args, opts, reader, text_colour(args))
-    if nrun is not None:  # the native core decodes it (analyzer/session/engine.py)
-        with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
-            code = native.decode(nrun, opts.path, out, args.output, opts.progress)
-        if code == EXIT_INTERRUPTED:
-            print("eg2scope: interrupted", file=sys.stderr)
-        elif code == EXIT_OK:  # not damaged (the damage says why itself)
-            report_empty(opts.path, nrun.size, nrun.records_written, opts.filter_words())
-        return code
-    with output_stream(args.output, binary=args.format in BINARY, inputs=[opts.path]) as out:
-        from ..session.parallel import JoinError, decode_in_parallel, resumed
-
-        resume = 0
-        try:
-            done = decode_in_parallel(opts, args.format, args.jobs, reader, out)
-        except JoinError as exc:  # parts were written: go on in one piece where they end
-            done, resume = None, exc.resume
-        if done is not None:
-            return done
-        listener = make_output(args, out, header=not resume)
-        if resume:
-            listener = resumed(listener, resume)
-        session, reader = run_capture(opts, [listener], reader)
-        raise_output_failure(session, args.output)
-    return finish_capture(opts.path, session, reader, opts)
+    output = DecodeOutput(
+        args.format, args.output, text_colour(args), args.absolute_time, args.jobs
+    )
+    return decode_capture(
+        opts, output, reader, lambda out, header: make_output(args, out, header=header)
+    )
 
 
 def to_a_terminal(output: str | None) -> bool:
@@ -180,32 +148,3 @@ def to_a_terminal(output: str | None) -> bool:
         return os.isatty(fd)
     finally:
         os.close(fd)
-
-
-def protocol_hint(opts: CaptureOptions, reader: CaptureReader) -> str:
-    """When ``--protocol`` names a byte protocol that finds fewer valid frames in the start of
-    a raw dump than another one: a hint naming the other ("" when the choice looks right).
-    The dump is decoded as asked."""
-    forced = opts.protocol
-    if forced is None or not isinstance(reader, RawBytesReader | GzipBytesReader):
-        return ""
-    counts = valid_frames(sniff.head(opts.path)[:DETECT_BYTES])
-    best = max(counts, key=lambda name: counts[name])
-    if forced not in counts or counts[best] <= counts[forced]:
-        return ""
-    found = f"{counts[forced]} valid frames" if counts[forced] else "no valid frame"
-    return (
-        f"hint: --protocol {short_name(forced)} finds {found} in the first {DETECT_BYTES} "
-        f"bytes; detection finds {counts[best]} {PROTOCOL_WORDS[best]} frames there: leave "
-        f"--protocol out, or give --protocol {short_name(best)}"
-    )
-
-
-def raise_output_failure(session: Session, path: str | None) -> None:
-    """The output listener was detached: fail (a file that was there before is kept)."""
-    if not session.detached:
-        return
-    exc = session.detached[0][1]
-    if isinstance(exc, BrokenPipeError):
-        raise exc  # `| head`: the reader went away; the CLI stops quietly
-    raise OutputError(f"cannot write {path or 'the output'}: {exc}")

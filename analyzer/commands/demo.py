@@ -7,10 +7,10 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from ..live_runner import Extra, add_session_arguments, check_recording_output, run_session
+from ..live_runner import Extra, check_recording_output, run_session
 from ..session.session import Session
 from ..sim.rig import BUSES, DemoRig
-from .common import probability
+from .common import add_session_arguments, probability
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..live_runner import add_session_arguments, run_session
-from ..plot.target import add_rerun_argument
+from ..live_runner import run_session
+from .common import add_rerun_argument, add_session_arguments
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, open_taps
 

@@ -8,7 +8,7 @@ import sys
 from typing import Any
 
 from ..errors import EXIT_INTERRUPTED, UsageError
-from ..live_runner import add_session_arguments, run_session
+from ..live_runner import run_session
 from ..plot.target import (
     SERVE_WEB,
     SPAWN,
@@ -18,18 +18,12 @@ from ..plot.target import (
     save_target,
 )
 from ..session.batches import session_engine
+from ..session.capture import CaptureOptions, finish_capture, open_reader, run_capture
 from ..session.engine import ENGINES
 from ..session.listener import Listener
 from ..session.session import Session
 from ..sources.capture import CaptureReader
-from .common import (
-    CaptureOptions,
-    finish_capture,
-    open_reader,
-    protocol_type,
-    run_capture,
-    speed_type,
-)
+from .common import add_session_arguments, protocol_type, speed_type
 from .demo import add_demo_arguments
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
 from .livesource import CAN_KEYS, add_source_arguments, open_taps

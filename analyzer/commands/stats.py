@@ -12,9 +12,10 @@ from rich.table import Table
 
 from decoders.flags import DESCRIPTIONS
 
+from ..session.capture import finish_capture, run_capture
 from ..sinks.stats import StatsListener
 from ..stats import COUNT_NAMES
-from .common import CaptureOptions, add_input_arguments, finish_capture, run_capture
+from .common import add_input_arguments, capture_options
 from .helptext import FILE_EXIT_STATUS, HelpFormatter
 
 
@@ -46,7 +47,7 @@ def _ms(x: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    opts = CaptureOptions.from_args(args)
+    opts = capture_options(args)
     listener = StatsListener()
     session, reader = run_capture(opts, [listener])
     code = finish_capture(opts.path, session, reader, opts)

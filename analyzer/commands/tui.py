@@ -10,24 +10,18 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_ERROR, UsageError
-from ..live_runner import (
-    add_session_arguments,
-    byte_times,
-    check_recording_output,
-    open_source,
-    recorder,
-)
-from ..plot.target import add_rerun_argument, rerun_listener
+from ..live_runner import byte_times, check_recording_output, open_source, recorder
+from ..plot.listener import rerun_listener
 from ..session.batches import session_engine
+from ..session.capture import byte_protocol, exit_code, open_reader
 from ..session.engine import ENGINES
 from ..session.listener import Listener
 from ..session.session import Session, SessionOptions, signals_call
 from ..sources.live import Tap
 from .common import (
-    CaptureOptions,
-    byte_protocol,
-    exit_code,
-    open_reader,
+    add_rerun_argument,
+    add_session_arguments,
+    capture_options,
     protocol_type,
     speed_type,
 )
@@ -114,7 +108,7 @@ def extra_listeners(args: argparse.Namespace, live: bool, notes: Notes) -> list[
     on stderr (where the .rrd went, the web viewer's address) goes to ``notes``: shown in the
     TUI and printed again once the terminal is given back."""
     with redirect_stderr(notes):  # the listener's output keeps the stream it is given
-        rerun = rerun_listener(args, source=args.output or args.file, live=live)
+        rerun = rerun_listener(args.rerun, source=args.output or args.file, live=live)
     return [] if rerun is None else [rerun]
 
 
@@ -169,7 +163,7 @@ def capture_plan(
             "-o records live sources; a capture is already recorded (export from the TUI "
             "with 'e' instead)"
         )
-    opts = replace(CaptureOptions.from_args(args), protocol=session_protocol(args))
+    opts = replace(capture_options(args), protocol=session_protocol(args))
     reader = stack.enter_context(open_reader(opts))
     source = ReplaySource(reader, opts.speed)
     options = SessionOptions(protocol=byte_protocol(opts), engine=opts.engine)
@@ -221,7 +215,7 @@ def check_capture_engine(args: argparse.Namespace) -> None:
     before any output such as ``--rerun``'s file is made)."""
     if args.engine == "auto":
         return
-    with open_reader(CaptureOptions.from_args(args)) as reader:
+    with open_reader(capture_options(args)) as reader:
         try:
             session_engine(args.engine, reader.kind, reader.single_stream)
         except ValueError as exc:

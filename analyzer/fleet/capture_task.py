@@ -23,10 +23,9 @@ from decoders.model import EG2_SERIAL
 from decoders.registry import detect_protocol, short_name
 
 from .. import __version__
-from ..commands.common import CaptureOptions, byte_protocol, open_reader, run_capture
-from ..commands.decode import protocol_hint
 from ..parquet import native as native_parquet
 from ..session import engine as native
+from ..session.capture import CaptureOptions, byte_protocol, open_reader, protocol_hint, run_capture
 from ..session.stage import DETECT_BYTES
 from ..sources import sniff
 from ..sources.capture import CAPTURE_READERS, RAW_BYTES, CaptureReader, reader_for

@@ -113,7 +113,7 @@ def check_protocol(paths: Iterable[Path], protocol: str | None) -> None:
     raw dump) is a usage error before anything is written, as ``decode`` makes it."""
     if protocol is None:
         return
-    from ..commands.common import CaptureOptions, open_reader
+    from ..session.capture import CaptureOptions, open_reader
     from ..sources.capture import open_capture
 
     for path in paths:

@@ -770,3 +770,14 @@ def _lane_values(values: Any) -> list[str]:
             return list(map(str, whole.tolist()))
         values = values.tolist()
     return list(map(str, values))
+
+
+def rerun_listener(
+    target: str | None, source: str | None = None, live: bool = True
+) -> RerunListener | None:
+    """The Rerun listener ``--rerun TARGET`` asks for (``target``: the option's value), or None
+    without it. ``source`` names the default .rrd file (None: a dated name); ``live``: a live
+    session (False for a capture replayed in the TUI)."""
+    if target is None:
+        return None
+    return RerunListener(parse_target(target, source), live=live)

@@ -15,7 +15,6 @@ rerun is imported only when an output is opened, so the command line starts fast
 
 from __future__ import annotations
 
-import argparse
 import atexit
 import os
 import signal
@@ -28,13 +27,10 @@ import webbrowser
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, Final
+from typing import IO, Any, Final
 from urllib.parse import quote
 
 from ..errors import UsageError
-
-if TYPE_CHECKING:
-    from ..session.listener import Listener
 
 APPLICATION_ID: Final = "eg2scope"
 SAVE: Final = "save"
@@ -124,37 +120,6 @@ def parse_target(text: str | None, source: str | None = None) -> RerunTarget:
         f"--rerun takes spawn, web, a viewer URL (rerun+http://HOST:PORT/proxy) or a file "
         f"NAME.rrd, not {text!r}"
     )
-
-
-# -- the option on the live commands -----------------------------------------------------------
-
-
-def add_rerun_argument(parser: argparse.ArgumentParser) -> None:
-    """``--rerun [TARGET]``: the session also goes to Rerun (see ``parse_target``)."""
-    parser.add_argument(
-        "--rerun",
-        nargs="?",
-        const=DEFAULT,
-        default=None,
-        metavar="TARGET",
-        help="also plot the session in Rerun: spawn (a viewer, the default when a display can "
-        "be opened; otherwise a dated .rrd file is written here), web (Rerun's web viewer on "
-        "127.0.0.1), a viewer URL rerun+http://HOST:PORT/proxy, or a file NAME.rrd",
-    )
-
-
-def rerun_listener(
-    args: argparse.Namespace, source: str | None = None, live: bool = True
-) -> Listener | None:
-    """The Rerun listener ``--rerun`` asks for, or None without it (or for a command without
-    the option). ``source`` names the default .rrd file (None: a dated name); ``live``: a live
-    session (False for a capture replayed in the TUI)."""
-    text = getattr(args, "rerun", None)
-    if text is None:
-        return None
-    from .listener import RerunListener
-
-    return RerunListener(parse_target(text, source), live=live)
 
 
 # -- opening an output -------------------------------------------------------------------------

@@ -54,8 +54,8 @@ from .listener import Listener
 from .stage import Decoding
 
 if TYPE_CHECKING:
-    from ..commands.common import CaptureOptions
     from ..sources.capture import CaptureReader
+    from .capture import CaptureOptions
 
 # Part sizes and warm-ups per kind of input. A candump log carries time: its warm-up covers
 # the longest a request may wait for its answer (a save, 2 s) on a busy bus. A raw dump has
@@ -468,7 +468,7 @@ def decode_in_parallel(
     exit code. None when the file is not split (the caller decodes it in one piece); a
     JoinError when the split failed after some output was written (the caller goes on in one
     piece from its ``resume``)."""
-    from ..commands.common import byte_protocol
+    from .capture import byte_protocol
 
     path = Path(opts.path)
     kind = reader_kind(reader)
@@ -510,7 +510,7 @@ def decode_in_parallel(
 def resumed(listener: Listener, resume: int) -> Listener:
     """``listener`` given only the records from ``resume`` on (a one-piece decode going on
     where a split decode's written output ends)."""
-    from ..commands.common import FilteredListener
+    from .capture import FilteredListener
 
     return FilteredListener(listener, lambda rec: _position(rec) >= resume)
 
@@ -522,7 +522,7 @@ class _PartProgress:
         self.bar: Any = None
         self.reader = reader
         if enabled and sys.stderr.isatty():
-            from ..commands.common import ProgressListener
+            from .capture import ProgressListener
 
             self.bar = ProgressListener(reader)
 

@@ -58,7 +58,7 @@ MIN_UPDATES_PER_S = 10
 # listener reads (their cost is the session's, shown apart)
 DECODE_ONLY = """
 import sys
-from analyzer.commands.common import CaptureOptions, run_capture
+from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 class Null(Listener):
     wants_states = sys.argv[2] == "states"

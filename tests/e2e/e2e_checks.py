@@ -20,9 +20,9 @@ import orjson
 import pytest
 from e2e_inputs import EG2SCOPE, HEADLESS, ROOT
 
-from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.model import StateSample
 from analyzer.session.batches import native_session_available
+from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.engine import available as native_decode_available
 from analyzer.session.listener import Listener
 from analyzer.session.session import Session, SessionOptions

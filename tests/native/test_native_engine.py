@@ -16,6 +16,7 @@ from native_core import needs_native
 
 from analyzer.cli import main
 from analyzer.session import engine as native
+from analyzer.session import native_run
 
 ROOT = Path(__file__).resolve().parents[2]
 SERIAL = ROOT / "captures" / "serial_session.bin"
@@ -100,13 +101,13 @@ def test_auto_uses_the_native_core_where_it_applies(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     used: list[str] = []
-    real = native.open_run
+    real = native_run.open_run
 
     def spy(opts, fmt, colour, absolute_time):  # type: ignore[no-untyped-def]
         used.append(fmt)
         return real(opts, fmt, colour, absolute_time)
 
-    monkeypatch.setattr(native, "open_run", spy)
+    monkeypatch.setattr(native_run, "open_run", spy)
     out = tmp_path / "o"
     for fmt in ("jsonl", "csv", "text"):
         assert run("decode", str(CAN), "-f", fmt, "-o", str(out))[0] == 0
@@ -118,7 +119,7 @@ def test_auto_uses_the_native_core_where_it_applies(
 
 @needs_native
 def test_unsupported_falls_back_to_python(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(native, "open_run", lambda *a: None)  # the core says Unsupported
+    monkeypatch.setattr(native_run, "open_run", lambda *a: None)  # the core says Unsupported
     out = tmp_path / "o.jsonl"
     assert run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out))[0] == 0
     assert out.read_bytes().count(b"\n") > 10
@@ -130,7 +131,7 @@ def test_unsupported_falls_back_to_python(tmp_path: Path, monkeypatch: pytest.Mo
     def unsupported(*args: object) -> None:
         raise _native.Unsupported("x.bin: not this one")
 
-    monkeypatch.setattr(native, "open_run", unsupported)
+    monkeypatch.setattr(native_run, "open_run", unsupported)
     assert run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out))[0] == 0  # Python did it
     code, _, err = run("decode", str(SERIAL), "-o", str(out), "--engine", "native")
     assert code == 2 and "--engine native: x.bin: not this one; use --engine python" in err

@@ -13,9 +13,9 @@ from typing import Any
 
 import can
 
-from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.model import StateSample
 from analyzer.recording.reader import McapRecorder
+from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 from decoders import build as b
 from decoders.eg2_serial import Cmd

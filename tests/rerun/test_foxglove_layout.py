@@ -12,8 +12,8 @@ import pytest
 from mcap.reader import make_reader
 from rerun_inputs import CAPTURES, ROOT
 
-from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.recording.reader import McapRecorder
+from analyzer.session.capture import CaptureOptions, run_capture
 
 LAYOUT = ROOT / "docs" / "foxglove-layout.json"
 PATH = re.compile(r"^(/state/[^.]+)\.(\w+)$")

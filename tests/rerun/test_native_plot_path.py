@@ -19,11 +19,11 @@ from rerun_inputs import CAPTURES, Collector, faults_can, write_candump
 from rrd_helpers import read_rrd
 
 from analyzer.cli import main
-from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.plot.listener import RerunListener
 from analyzer.plot.logs import log_rows
 from analyzer.session import engine as native
 from analyzer.session.batches import native_session_available, records_jsonl
+from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

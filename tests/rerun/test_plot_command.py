@@ -25,22 +25,21 @@ from rerun_inputs import CAPTURES, CASES, INPUTS, ROOT, TIMED, Collector
 from rrd_helpers import blueprint_text, read_rrd, views
 
 from analyzer.cli import main
-from analyzer.commands.common import CaptureOptions, run_capture
-from analyzer.plot.listener import RerunListener
+from analyzer.commands.common import add_rerun_argument
+from analyzer.plot.listener import RerunListener, rerun_listener
 from analyzer.plot.target import (
     CONNECT,
     SAVE,
     SERVE_WEB,
     SPAWN,
     RerunTarget,
-    add_rerun_argument,
     can_display,
     parse_target,
     rerun_executable,
-    rerun_listener,
     rrd_name,
 )
 from analyzer.session.batches import native_session_available
+from analyzer.session.capture import CaptureOptions, run_capture
 from decoders import build as b
 from decoders.eg2_serial import Cmd
 from decoders.registers import opening_mm
@@ -466,13 +465,13 @@ def test_rrd_name_of_a_live_session_is_dated() -> None:
 def test_the_rerun_option_of_the_live_commands(tmp_path: Path) -> None:
     parser = argparse.ArgumentParser()
     add_rerun_argument(parser)
-    assert rerun_listener(parser.parse_args([])) is None
+    assert rerun_listener(parser.parse_args([]).rerun) is None
     out = tmp_path / "live.rrd"
-    listener = rerun_listener(parser.parse_args(["--rerun", str(out)]))
+    listener = rerun_listener(parser.parse_args(["--rerun", str(out)]).rerun)
     assert isinstance(listener, RerunListener) and listener.live
     listener.close()
     assert read_rrd(out).blueprints
     args = parser.parse_args(["--rerun"])
     assert args.rerun == "default"
     with pytest.raises(ValueError, match="--rerun"):
-        rerun_listener(parser.parse_args(["--rerun", "bogus"]))
+        rerun_listener(parser.parse_args(["--rerun", "bogus"]).rerun)

@@ -20,11 +20,11 @@ import pytest
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
-from analyzer.commands.common import CaptureOptions, run_capture
 from analyzer.model import StateSample
 from analyzer.plot.blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
 from analyzer.plot.listener import RerunListener
 from analyzer.session.batches import native_session_available
+from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import make_listener
 from analyzer.session.session import live_session
 from analyzer.sources.can_tap import CanTap

@@ -16,7 +16,7 @@ import can
 import pytest
 from capture_helpers import CAN_LOG, ROOT, sample_frames, write_layout
 
-from analyzer.commands.common import CaptureOptions, byte_protocol, open_reader
+from analyzer.session.capture import CaptureOptions, byte_protocol, open_reader
 from analyzer.session.session import Session, SessionOptions
 from analyzer.sources.can_message import frame_to_message
 from analyzer.tui.app import Eg2ScopeApp, SessionPlan

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from conftest import CAPTURES
 
-from analyzer.commands.common import CaptureOptions, run_capture
+from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 from analyzer.tui.aggregates import HISTOGRAM_BINS, Aggregates, latency_stats
 from analyzer.tui.export import raw_item

@@ -18,8 +18,8 @@ from textual.command import CommandList, CommandPalette
 from textual.widgets import Input, RichLog, Static
 from textual.widgets._footer import FooterKey
 
-from analyzer.commands.common import CaptureOptions, open_reader
 from analyzer.commands.tui import finish, summary_line
+from analyzer.session.capture import CaptureOptions, open_reader
 from analyzer.session.session import Session, SessionOptions
 from analyzer.sim.rig import DemoRig
 from analyzer.tui.aggregates import LATENCY_KEEP, Aggregates
