@@ -24,7 +24,7 @@ from pathlib import Path
 
 import can
 
-from analyzer.recording.reader import McapRecorder
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.session import Session
 from analyzer.sources.capture import open_capture
 from analyzer.sources.source import CaptureSource

@@ -65,7 +65,7 @@ LISTENERS: dict[str, str] = {
     "csv": "analyzer.sinks.csv:CsvListener",
     "parquet": "analyzer.parquet.writer:ParquetListener",
     "stats": "analyzer.sinks.stats:StatsListener",
-    "mcap": "analyzer.recording.reader:McapRecorder",
+    "mcap": "analyzer.recording.recorder:McapRecorder",
     "rerun": "analyzer.plot.listener:RerunListener",
 }
 

@@ -12,7 +12,7 @@ from typing import Final
 from decoders.model import EG2_CAN, FOREIGN_CAN, CanFrame, Chunk, Record
 
 from ..model import Item
-from ..recording.reader import McapRecorder
+from ..recording.recorder import McapRecorder
 from ..sinks.csv import CsvListener
 from ..sinks.jsonl import JsonlListener
 from .store import RecordStore

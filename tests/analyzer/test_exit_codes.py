@@ -367,7 +367,7 @@ def _empty_captures(tmp_path: Path) -> dict[str, Path]:
     with can.BLFWriter(str(blf)):
         pass
     mcap = paths["empty.mcap"] = tmp_path / "empty.mcap"
-    from analyzer.recording.reader import McapRecorder
+    from analyzer.recording.recorder import McapRecorder
 
     McapRecorder(mcap).close()  # a recording of a source that captured nothing
     return paths

@@ -20,7 +20,8 @@ import can.player
 import pytest
 from pymodbus.client import ModbusSerialClient
 
-from analyzer.recording.reader import McapRecorder, read_records
+from analyzer.recording.reader import read_records
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.session import Session, live_session
 from analyzer.session.stage import Decoding
 from analyzer.sim.endpoints import ModbusGripperServer

@@ -13,7 +13,8 @@ from pathlib import Path
 import can
 
 from analyzer.model import Item
-from analyzer.recording.reader import McapRecorder, read_events, read_records
+from analyzer.recording.reader import read_events, read_records
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.session import Session, live_session
 from analyzer.session.stage import Decoding
 from analyzer.sinks.text import TextListener

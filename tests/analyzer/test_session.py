@@ -18,7 +18,8 @@ import pytest
 from recording.mcap_checks import assert_time_ordered
 
 from analyzer.model import SourceEvent
-from analyzer.recording.reader import McapRecorder, read_events, read_records, read_states
+from analyzer.recording.reader import read_events, read_records, read_states
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener, listener_class, make_listener
 from analyzer.session.session import Session, SessionOptions, live_session

@@ -83,7 +83,7 @@ def _message(f: CanFrame) -> object:
 
 def _mcap(path: Path, frames: int, seed: int) -> None:
     """A recording of a CAN bus, as ``eg2scope record`` writes it."""
-    from analyzer.recording.reader import McapRecorder
+    from analyzer.recording.recorder import McapRecorder
     from analyzer.session.session import Session
     from analyzer.sources.capture import open_capture
     from analyzer.sources.source import CaptureSource

@@ -36,7 +36,7 @@ sys.path.insert(0, str(HERE))
 import can  # noqa: E402
 from traffic import can_frames, modbus_frames  # noqa: E402
 
-from analyzer.recording.reader import McapRecorder  # noqa: E402
+from analyzer.recording.recorder import McapRecorder  # noqa: E402
 from analyzer.session.session import live_session  # noqa: E402
 from analyzer.sources.can_tap import CanTap  # noqa: E402
 from analyzer.sources.live import wait_open  # noqa: E402

@@ -42,7 +42,7 @@ if why := why_not():
 import native_corpus as corpus  # after the check (tests/native is on sys.path)
 from analyzer._native import LiveCan, RecordBatch, can_raw_messages
 
-from analyzer.recording.reader import _raw_message
+from analyzer.recording.layout import raw_message
 from analyzer.session.batches import json_message
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -476,7 +476,7 @@ def test_generated_sessions(session: tuple[list[Step], bool, int]) -> None:
 
 def dumps_raw(item: Item) -> bytes:
     """The recorder's ``/raw`` message of an item, as the Python recorder makes it."""
-    return json_message(_raw_message(item))
+    return json_message(raw_message(item))
 
 
 def test_raw_messages() -> None:

@@ -17,7 +17,7 @@ from mcap.reader import make_reader
 from native_core import needs_native
 
 from analyzer.model import ERROR, Item, SourceEvent, StateSample
-from analyzer.recording.reader import McapRecorder
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.batches import NativeCanDecoding, session_engine
 from analyzer.session.listener import Listener
 from analyzer.session.session import Session, SessionOptions

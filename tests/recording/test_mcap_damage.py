@@ -17,12 +17,12 @@ from mcap_checks import assert_time_ordered
 from analyzer.model import INFO, Item, SourceEvent
 from analyzer.recording.reader import (
     McapCaptureReader,
-    McapRecorder,
-    _Recording,
     item_from_message,
     read_events,
     read_records,
 )
+from analyzer.recording.recorder import McapRecorder
+from analyzer.recording.recovery import Recording
 from decoders.model import CanFrame, Chunk, Record
 
 T0 = 1_763_700_000.0
@@ -81,7 +81,7 @@ def chunk_indexes(path: Path) -> list[ChunkIndex]:
 def held_in(path: Path, ci: ChunkIndex) -> list[Item | SourceEvent]:
     """What replaying reads from one chunk of an intact file."""
     with path.open("rb") as f:
-        rec = _Recording(f, path.stat().st_size)
+        rec = Recording(f, path.stat().st_size)
         assert rec.summary is not None
         channels = rec.summary.channels
         out: list[Item | SourceEvent] = []
@@ -168,7 +168,7 @@ def test_a_flipped_byte_in_any_chunk_byte_is_reported_and_the_rest_read(
 def test_the_lost_chunk_report_counts_every_topic(finished: Path, tmp_path: Path) -> None:
     data = finished.read_bytes()
     with finished.open("rb") as f:
-        rec = _Recording(f, len(data))
+        rec = Recording(f, len(data))
         assert rec.summary is not None
         channels = rec.summary.channels
         # a chunk holding a decoded record and an event besides raw input

@@ -18,12 +18,12 @@ from analyzer.errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_USAGE, UsageError
 from analyzer.model import Item
 from analyzer.recording.reader import (
     McapCaptureReader,
-    McapRecorder,
     read_events,
     read_metadata,
     read_records,
     read_states,
 )
+from analyzer.recording.recorder import McapRecorder
 from analyzer.sources.capture import open_capture
 from decoders import build as b
 

@@ -15,16 +15,15 @@ from mcap_checks import assert_time_ordered, mcap_messages
 from analyzer import __version__
 from analyzer.errors import UsageError
 from analyzer.model import ERROR, INFO, WARNING, Item, SourceEvent, StateSample
-from analyzer.recording import reader as recording
+from analyzer.recording import layout, recovery
 from analyzer.recording.reader import (
     McapCaptureReader,
-    McapRecorder,
     read_events,
     read_metadata,
     read_records,
     read_states,
-    topic_part,
 )
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.listener import Listener, make_listener
 from analyzer.session.session import Session
 from analyzer.session.stage import Decoding
@@ -140,12 +139,13 @@ def test_recorder_is_a_listener_found_by_name(tmp_path: Path) -> None:
         assert not hasattr(McapRecorder, dead), dead
 
 
-def test_reader_and_writer_live_in_one_module(recorded: Path) -> None:
-    for gone in ("analyzer.sinks.mcap", "analyzer.sources.mcap_reader"):
+def test_reader_and_writer_live_side_by_side(recorded: Path) -> None:
+    for gone in ("analyzer.sinks.mcap", "analyzer.sources.mcap_reader", "analyzer.recording.mcap"):
         assert importlib.util.find_spec(gone) is None, gone
     with open_capture(recorded) as reader:
-        assert type(reader) is recording.McapCaptureReader
-    assert recording.McapRecorder.__module__ == recording.McapCaptureReader.__module__
+        assert type(reader) is McapCaptureReader
+    assert McapRecorder.__module__ == "analyzer.recording.recorder"
+    assert McapCaptureReader.__module__ == "analyzer.recording.reader"
 
 
 def test_layout_topics_schemas_encodings(recorded: Path) -> None:
@@ -268,7 +268,7 @@ def test_capture_reader_yields_items_and_source_events(
     def no_stream(*_a: object) -> None:
         raise AssertionError("an intact file must be read through its index")
 
-    monkeypatch.setattr(recording._Scan, "_streamed", no_stream)
+    monkeypatch.setattr(recovery.Scan, "_streamed", no_stream)
     items = sample_items()
     events = [
         SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops"),
@@ -340,9 +340,9 @@ def test_redecoding_a_recording_gives_the_same_records(tmp_path: Path) -> None:
 
 
 def test_topic_names_for_awkward_bus_names(tmp_path: Path) -> None:
-    assert topic_part("/dev/ttyUSB0") == "dev/ttyUSB0"
-    assert topic_part("rfc2217://host:4000") == "rfc2217/host_4000"
-    assert topic_part("COM3") == "COM3"
+    assert layout.topic_part("/dev/ttyUSB0") == "dev/ttyUSB0"
+    assert layout.topic_part("rfc2217://host:4000") == "rfc2217/host_4000"
+    assert layout.topic_part("COM3") == "COM3"
     path = tmp_path / "names.mcap"
     with McapRecorder(path, {}, compression="none") as rec:
         rec.on_raw([Item("/dev/ttyUSB0", Chunk(b"\x01", T0))])
@@ -362,7 +362,7 @@ def test_compressions(tmp_path: Path, compression: str) -> None:
     assert_time_ordered(path)
     with McapCaptureReader(path) as reader:
         assert len(list(reader)) == len(sample_items())
-    assert recording.best_compression() == "zstd"
+    assert layout.best_compression() == "zstd"
 
 
 def test_closed_recorder_refuses_writes(tmp_path: Path) -> None:

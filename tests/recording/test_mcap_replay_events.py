@@ -15,7 +15,8 @@ from taps.tap_helpers import Pty
 
 from analyzer.cli import main
 from analyzer.model import INFO, WARNING, Item, SourceEvent
-from analyzer.recording.reader import McapCaptureReader, McapRecorder, read_events
+from analyzer.recording.reader import McapCaptureReader, read_events
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.session import live_session
 from analyzer.sources.live import wait_open
 from analyzer.sources.serial_tap import SerialTap

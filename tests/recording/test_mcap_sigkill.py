@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 CHILD = r"""
 import sys, time
-from analyzer.recording.reader import McapRecorder
+from analyzer.recording.recorder import McapRecorder
 from analyzer.model import Item
 from decoders.model import CanFrame, Chunk
 

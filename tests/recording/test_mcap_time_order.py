@@ -14,7 +14,8 @@ from mcap.reader import make_reader
 from mcap_checks import assert_time_ordered, mcap_messages
 
 from analyzer.model import INFO, WARNING, Item, SourceEvent
-from analyzer.recording.reader import McapCaptureReader, McapRecorder, read_records
+from analyzer.recording.reader import McapCaptureReader, read_records
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.stage import Decoding
 from analyzer.session.tracker import Tracker
 from decoders import build as b

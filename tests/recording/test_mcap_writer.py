@@ -20,7 +20,7 @@ from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from analyzer.recording.reader import _LAST_NS, _log_times, _ns
+from analyzer.recording.recorder import _LAST_NS, _log_times, _ns
 from analyzer.recording.writer import McapWriter
 
 LIBRARY_COMPRESSION = {

@@ -14,7 +14,7 @@ from typing import Any
 import can
 
 from analyzer.model import StateSample
-from analyzer.recording.reader import McapRecorder
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 from decoders import build as b

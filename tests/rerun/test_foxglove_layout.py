@@ -12,7 +12,7 @@ import pytest
 from mcap.reader import make_reader
 from rerun_inputs import CAPTURES, ROOT
 
-from analyzer.recording.reader import McapRecorder
+from analyzer.recording.recorder import McapRecorder
 from analyzer.session.capture import CaptureOptions, run_capture
 
 LAYOUT = ROOT / "docs" / "foxglove-layout.json"

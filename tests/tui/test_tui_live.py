@@ -14,7 +14,8 @@ import pytest
 from conftest import demo_app, driving, until
 
 from analyzer.model import derived
-from analyzer.recording.reader import MARKS, read_metadata
+from analyzer.recording.layout import MARKS
+from analyzer.recording.reader import read_metadata
 from analyzer.sim.rig import DemoRig
 from analyzer.tui.rows import STYLE_ERROR, row_style
 from analyzer.tui.widgets.devices import STATE_WIDTH, DevicePanel, state_words

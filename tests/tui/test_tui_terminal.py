@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 from conftest import ROOT, eg2scope
 
-from analyzer.recording.reader import MARKS, McapCaptureReader, read_metadata
+from analyzer.recording.layout import MARKS
+from analyzer.recording.reader import McapCaptureReader, read_metadata
 
 pexpect = pytest.importorskip("pexpect")
 pyte = pytest.importorskip("pyte")
