@@ -2,12 +2,12 @@
 commands, errors, fault marks and bus health around them (the entity contract: docs/rerun.md,
 its names: ``analyzer/plot/entities.py``).
 
-Values are buffered and sent as typed columns in batches (``rerun_batch.py``: one Arrow record
+Values are buffered and sent as typed columns in batches (``plot/batch.py``: one Arrow record
 batch for the entities that share their rows, one chunk per entity; never one ``log`` call per
 value): every ``flush_interval`` seconds (a live viewer is updated ten times a second), whenever
 ``max_rows`` records and samples are waiting, and at the end. Nothing is downsampled. Each row
 carries ``capture_time`` (the record's ``t``) and ``frame`` (its ``seq``); a capture without
-timestamps (a raw serial dump) has ``frame`` only. The default blueprint (``rerun_blueprint``)
+timestamps (a raw serial dump) has ``frame`` only. The default blueprint (``plot/blueprint.py``)
 shows the entities that have rows: a viewer that watches gets a new one whenever a gripper, a
 bus or a quantity appears; a capture's file gets that of the whole capture at the end.
 
@@ -16,7 +16,7 @@ the fields it changed (its "shape": a CAN reply of force, opening, current and t
 shape, a reply of state and fault another): one C-level call cuts the plotted values out of it
 into the shape's row-major array, two appends add its time and seq; a shape's fields share their
 rows, so they go out as one record batch. Records are read as columns; the few the logs show
-(problems, commands) are gathered per bus and gripper by ``rerun_logs.log_rows``, which the
+(problems, commands) are gathered per bus and gripper by ``plot/logs.log_rows``, which the
 native core does for its batches without making a Record per record. Live, the session flushes
 at its ticks when a flush is due, and a timer thread flushes when a long batch keeps the session
 busy past that; the Arrow columns are built and sent outside the buffers' lock, so the session
@@ -444,7 +444,7 @@ class RerunListener(Listener):
 
     def _logs(self, records: Sequence[Record]) -> None:
         """The records the logs show: problems in their bus's error log and health counts,
-        commands and fault marks under their gripper (``rerun_logs.log_rows``: columns, not
+        commands and fault marks under their gripper (``plot/logs.log_rows``: columns, not
         one object per record, on the native path)."""
         buses, grippers = log_rows(records)
         for name, (t, seq, text, level, nonframes, problems, unanswered) in buses.items():

@@ -2,7 +2,7 @@
 
 A session on CAN input with the native core built (``session_engine``) decodes with
 ``_native.LiveCan`` and tracks with ``_native.Tracker``; the same records and samples as
-``pipeline.Decoding`` and ``tracker.Tracker`` (tests/native/test_live_native.py and
+``stage.Decoding`` and ``tracker.Tracker`` (tests/native/test_live_native.py and
 test_tracker_native.py require it) come as a ``RecordBatch`` and a ``SampleBatch``. Both are
 sequences whose items become Python objects only when read; their bulk methods give a column
 (times, buses) or every item's JSON without any. The functions here take either kind, so a
@@ -35,7 +35,7 @@ _CAN_RAW: Any = getattr(_native, "can_raw_messages", None)
 
 
 class SessionDecoding(Protocol):
-    """What a session asks of its decoding (``pipeline.Decoding`` or the native ``LiveCan``).
+    """What a session asks of its decoding (``stage.Decoding`` or the native ``LiveCan``).
     The native core answers with ``RecordBatch``es, which behave as these lists do where the
     session uses them (``len``, iteration, indexing, ``+=`` of another)."""
 

@@ -83,7 +83,7 @@ def open_run(opts: CaptureOptions, fmt: str, colour: bool, absolute_time: bool) 
     """A native decode (iterate it for output bytes). ``_native.Unsupported`` when the core
     does not handle this input (the Python engine decodes it); OSError: it cannot be opened."""
     assert _native is not None
-    if fmt == "parquet":  # records as Arrow columns (native_parquet.py)
+    if fmt == "parquet":  # records as Arrow columns (parquet/native.py)
         from ..parquet.native import open_run as open_arrow_run
 
         return open_arrow_run(

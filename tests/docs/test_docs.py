@@ -230,7 +230,8 @@ def _layout() -> str:
 def _modules() -> list[str]:
     names = [p.name for p in (ROOT / "decoders").glob("*.py")]
     names += [p.name for p in (ROOT / "analyzer").glob("*.py")]
-    names += [p.name for p in (ROOT / "analyzer" / "sources").glob("*.py")]
+    for folder in ("sources", "session", "recording", "parquet", "plot"):
+        names += [p.name for p in (ROOT / "analyzer" / folder).glob("*.py")]
     names += [p.parent.name + "/" for p in (ROOT / "analyzer").glob("*/__init__.py")]
     return sorted(set(names) - {"__init__.py", "__main__.py"})
 

@@ -1,7 +1,7 @@
 """The plot's fast path on the native core, against the Python reference on the same input:
 a candump log read by the native core straight into the session's native decoding (the same
 records, the same damage reported, the same exit status and .rrd as the Python reader gives),
-and the logs' rows (``rerun_logs.log_rows``) made from a native ``RecordBatch`` equal to
+and the logs' rows (``plot/logs.log_rows``) made from a native ``RecordBatch`` equal to
 those made from its records as objects. Inputs: the sample capture, a capture whose every
 command draws a warning (the benchmark's), a capture with faults and one with damaged lines
 and a cut-off last line, plain and gzip compressed."""
