@@ -1,4 +1,5 @@
-"""eg2scope: the analyzer application (sources, session, sinks, recording, parquet, plot, CLI, TUI, simulator)."""
+"""eg2scope: the analyzer application (sources, session, sinks, recording, parquet, plot, CLI,
+TUI, simulator)."""
 
 from .sources.mf4 import defer as _defer_asammdf
 

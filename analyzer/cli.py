@@ -12,7 +12,7 @@ from . import __version__
 from .commands import SUBCOMMANDS
 from .commands.helptext import EXIT_STATUS, HelpFormatter, epilog
 from .errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, UsageError, stop_status
-from .session import engine as native
+from .session import engine
 from .session.session import signals_as_interrupt
 
 
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
     )
     parser.add_argument(
-        "--version", action="version", version=f"eg2scope {__version__} ({native.status()})"
+        "--version", action="version", version=f"eg2scope {__version__} ({engine.status()})"
     )
     sub = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:

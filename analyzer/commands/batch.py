@@ -9,7 +9,7 @@ from typing import Any
 
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..interrupts import noted_interrupts
-from ..session import engine as native
+from ..session import engine
 from .common import add_protocol_argument, positive_int
 from .helptext import BATCH_EXIT_STATUS, HelpFormatter
 
@@ -72,7 +72,7 @@ def add_subparser(sub: Any) -> None:
     add_protocol_argument(parser)
     parser.add_argument(
         "--engine",
-        choices=native.ENGINES,
+        choices=engine.ENGINES,
         default="auto",
         help="auto: the native core wherever 'decode' uses it (candump logs and raw dumps, "
         "their state samples too; CAN sessions), else Python (default); python: the Python "
@@ -113,9 +113,9 @@ def _check(args: argparse.Namespace) -> None:
             f"batch on several workers needs Dask, which is not installed: {INSTALL_HINT}, "
             "or run it in one process with --workers 1"
         )
-    if args.engine == "native" and not native.available():
+    if args.engine == "native" and not engine.available():
         raise UsageError(
-            f"--engine native: the native core is {native.WHY_NOT}; use --engine auto or python"
+            f"--engine native: the native core is {engine.WHY_NOT}; use --engine auto or python"
         )
     out = Path(args.output)
     if out.exists() and not out.is_dir():
