@@ -11,7 +11,6 @@ from typing import IO, Any
 
 from ..errors import UsageError
 from ..session.capture import DecodeOutput, open_reader, protocol_hint
-from ..session.decode_routes import decode_capture
 from ..session.engine import ENGINES
 from ..session.listener import Listener, make_listener
 from .common import add_input_arguments, capture_options, non_negative_int
@@ -128,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
     output = DecodeOutput(
         args.format, args.output, text_colour(args), args.absolute_time, args.jobs
     )
+    from ..session.decode_routes import decode_capture  # parts' multiprocessing: when used
+
     return decode_capture(
         opts, output, reader, lambda out, header: make_output(args, out, header=header)
     )

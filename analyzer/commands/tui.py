@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_ERROR, UsageError
 from ..live_runner import byte_times, check_recording_output, open_source, recorder
-from ..plot.listener import rerun_listener
 from ..session.batches import session_engine
 from ..session.capture import byte_protocol, exit_code, open_reader
 from ..session.engine import ENGINES
@@ -107,6 +106,8 @@ def extra_listeners(args: argparse.Namespace, live: bool, notes: Notes) -> list[
     """``--rerun``: the Rerun listener ``record --rerun`` and ``live --rerun`` use. What it says
     on stderr (where the .rrd went, the web viewer's address) goes to ``notes``: shown in the
     TUI and printed again once the terminal is given back."""
+    from ..plot.listener import rerun_listener  # Rerun is imported only when it is used
+
     with redirect_stderr(notes):  # the listener's output keeps the stream it is given
         rerun = rerun_listener(args.rerun, source=args.output or args.file, live=live)
     return [] if rerun is None else [rerun]
