@@ -196,9 +196,10 @@ def _outputs(
         listeners.append(make_listener(show, sys.stdout.buffer))
     if args.output:
         listeners.append(recorder(args.output, taps))
-    from .plot.listener import rerun_listener
+    target = getattr(args, "rerun", None)
+    if target is not None:  # Rerun is imported only when it is asked for
+        from .plot.listener import rerun_listener
 
-    rerun = rerun_listener(getattr(args, "rerun", None), source=args.output)
-    if rerun is not None:
-        listeners.append(rerun)
+        rerun = rerun_listener(target, source=args.output)
+        listeners += [] if rerun is None else [rerun]
     return listeners

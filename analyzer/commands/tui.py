@@ -106,7 +106,9 @@ def extra_listeners(args: argparse.Namespace, live: bool, notes: Notes) -> list[
     """``--rerun``: the Rerun listener ``record --rerun`` and ``live --rerun`` use. What it says
     on stderr (where the .rrd went, the web viewer's address) goes to ``notes``: shown in the
     TUI and printed again once the terminal is given back."""
-    from ..plot.listener import rerun_listener  # Rerun is imported only when it is used
+    if args.rerun is None:
+        return []  # Rerun is imported only when it is asked for
+    from ..plot.listener import rerun_listener
 
     with redirect_stderr(notes):  # the listener's output keeps the stream it is given
         rerun = rerun_listener(args.rerun, source=args.output or args.file, live=live)
