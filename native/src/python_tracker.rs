@@ -200,7 +200,7 @@ impl PyTracker {
     #[getter]
     fn states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let states = self.tracker().states().to_vec(); // unlocked before Python runs
-        let cls = DEVICE_STATE.import(py, "analyzer.tracker", "DeviceState")?;
+        let cls = DEVICE_STATE.import(py, "analyzer.session.tracker", "DeviceState")?;
         let out = PyDict::new(py);
         for st in &states {
             let bus = PyString::new(py, &st.bus);
