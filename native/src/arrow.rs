@@ -19,8 +19,8 @@
 //! buffer at all.
 
 use crate::arrow_states::{Row, StateColumns};
+use crate::decoders::model::{Record, Value};
 use crate::json::{push_map, push_str, push_value};
-use crate::model::{Record, Value};
 use crate::tracker::Tracker;
 use std::sync::{Arc, Mutex};
 
@@ -761,7 +761,7 @@ impl RecordColumns {
 fn split_fields(
     col: &mut Column,
     row: usize,
-    fields: &[(crate::model::Str, Value)],
+    fields: &[(crate::decoders::model::Str, Value)],
     values_key: &str,
     json: &mut String,
 ) {
@@ -886,7 +886,7 @@ impl crate::writers::RecordWriter for ArrowWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Record, EG2_CAN, MODBUS_RTU};
+    use crate::decoders::model::{Record, EG2_CAN, MODBUS_RTU};
     use std::borrow::Cow;
 
     /// A small parse schema: two record columns, one family with a register map, other_fields.

@@ -7,28 +7,14 @@
 mod alloc;
 pub mod arrow;
 pub mod arrow_states;
-#[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
-pub mod can;
 pub mod candump;
-pub mod detect;
-pub mod flags;
-#[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
-pub mod framing;
+pub mod decoders;
 pub mod hash;
 pub mod json;
-pub mod lint;
 pub mod live;
-#[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
-pub mod modbus; // with modbus_framing and modbus_pdu
-pub mod model;
-#[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
-pub mod pairing;
 pub mod pipeline;
 pub mod pyfloat;
 pub mod rawfile;
-pub mod registers;
-#[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
-pub mod serial;
 pub mod sniff;
 pub mod tracker;
 pub mod writers;

@@ -6,16 +6,16 @@
 //! their answer): memory stays flat at any input size. The output is pulled in batches of
 //! bytes (`next_batch`), which the Python binding hands on without looking inside.
 
-use crate::can::{CanMemos, Eg2CanDecoder};
 use crate::candump::{BusNamer, CandumpReader};
-use crate::detect::detect_protocol;
-use crate::framing::StreamDecoder;
-use crate::lint::TimingLinter;
-use crate::modbus::ModbusRtuDecoder;
-use crate::model::{CanFrame, Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
-use crate::pairing::Pairer;
+use crate::decoders::eg2_can::{CanMemos, Eg2CanDecoder};
+use crate::decoders::eg2_serial::Eg2SerialDecoder;
+use crate::decoders::framing::StreamDecoder;
+use crate::decoders::lint::TimingLinter;
+use crate::decoders::modbus_rtu::ModbusRtuDecoder;
+use crate::decoders::model::{CanFrame, Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
+use crate::decoders::pairing::Pairer;
+use crate::decoders::registry::detect_protocol;
 use crate::rawfile::{check_readable, BytesReader};
-use crate::serial::Eg2SerialDecoder;
 use crate::writers::{make_writer, Format, RecordWriter, TextOptions};
 use std::io;
 use std::path::Path;

@@ -11,7 +11,7 @@
 //! named); an input or an option the native core does not handle raises `Unsupported`, which
 //! tells Python to decode with its own engine instead.
 
-use crate::model::{EG2_SERIAL, MODBUS_RTU};
+use crate::decoders::model::{EG2_SERIAL, MODBUS_RTU};
 use crate::pipeline::{DecodeOptions, DecodeRun};
 use crate::writers::{Format, TextOptions};
 use pyo3::create_exception;

@@ -7,7 +7,7 @@
 //! only when no listener wants the raw items and its decoding is the native `LiveCan`.
 
 use crate::candump::{BusNamer, CandumpReader};
-use crate::model::CanFrame;
+use crate::decoders::model::CanFrame;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -6,10 +6,10 @@
 //! lengths, the CRC-16/MODBUS confirms one. Candidates within `CLOSE` bytes of each other can
 //! collide structurally; `_decide`/`_settle` pick one exactly as the Python does.
 
-use crate::model::RESPONSE;
+use crate::decoders::model::RESPONSE;
 
-use crate::framing::Stream;
-pub use crate::framing::NEED_MORE;
+use crate::decoders::framing::Stream;
+pub use crate::decoders::framing::NEED_MORE;
 
 // function codes, as sent in requests (an exception response sets bit 7)
 pub const READ_COILS: u8 = 0x01;

@@ -14,12 +14,12 @@ use std::collections::HashSet;
 use std::fmt::Write;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use crate::flags as F;
-use crate::model::{
+use crate::decoders::flags as F;
+use crate::decoders::model::{
     CanFrame, Fields, PairKey, Record, SharedFields, Str, Text, Value, EG2_CAN, FOREIGN_CAN, FRAME,
 };
-use crate::model::{REQUEST, RESPONSE};
-use crate::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
+use crate::decoders::model::{REQUEST, RESPONSE};
+use crate::decoders::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
 
 pub const OPERATIONS: [&str; 4] = ["read", "write", "positioning move", "servo follow"];
 pub const OP_READ: u32 = 0;

@@ -14,14 +14,14 @@
 //! day, so (as the Python) the decode of a frame is memoised by its bytes; a hit costs a hash
 //! lookup and clones.
 
-use crate::flags as F;
-use crate::framing::{ByteStreamDecoder, Framing, Stream, NEED_MORE};
-use crate::hash::FrameMemo;
-use crate::model::{
+use crate::decoders::flags as F;
+use crate::decoders::framing::{ByteStreamDecoder, Framing, Stream, NEED_MORE};
+use crate::decoders::model::{
     Fields, Notes, Record, SharedFields, Str, Text, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE,
 };
+use crate::decoders::registers::{self, opening_mm};
+use crate::hash::FrameMemo;
 use crate::pyfloat::py_repr;
-use crate::registers::{self, opening_mm};
 use std::borrow::Cow;
 use std::fmt::Write;
 use std::sync::{Arc, OnceLock};
@@ -996,7 +996,7 @@ impl ByteStreamDecoder<Eg2Serial> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::framing::StreamDecoder;
+    use crate::decoders::framing::StreamDecoder;
 
     fn frame(header: [u8; 2], id: u8, code: u8, data: &[u8]) -> Vec<u8> {
         let mut f = vec![header[0], header[1], id, data.len() as u8 + 1, code];
@@ -1089,7 +1089,7 @@ mod tests {
         assert!(out.is_empty()); // not quiet long enough
         d.idle(10.2, &mut out);
         assert_eq!(out.len(), 1);
-        assert_eq!(out[0].kind, crate::model::TRUNCATED);
+        assert_eq!(out[0].kind, crate::decoders::model::TRUNCATED);
         assert_eq!(out[0].t, Some(10.0));
     }
 }

@@ -10,15 +10,15 @@
 use std::borrow::Cow;
 use std::fmt::Write;
 
-use crate::flags as F;
-use crate::modbus::modbus_framing::{
+use crate::decoders::flags as F;
+use crate::decoders::modbus_framing::{
     candidates, crc16, crc_state, function_text, read_response_len, word, Pending, CRC_BAD,
     CRC_SWAPPED_ORDER, KIND, KIND_EXCEPTION, KIND_MULTI, KIND_READ, KIND_SINGLE, READ_COILS,
     READ_DISCRETE, READ_HOLDING, WRITE_COIL, WRITE_COILS, WRITE_MULTIPLE, WRITE_SINGLE,
 };
-use crate::modbus::modbus_registers::{words, Memo};
-use crate::model::{Fields, Notes, PairKey, Str, Value, REQUEST, RESPONSE};
-use crate::registers::is_save_register;
+use crate::decoders::modbus_registers::{words, Memo};
+use crate::decoders::model::{Fields, Notes, PairKey, Str, Value, REQUEST, RESPONSE};
+use crate::decoders::registers::is_save_register;
 
 pub const CRC_SWAPPED: &str = "CRC byte order swapped (high byte first)";
 pub const NO_REQUEST: &str = "read response without a known request: registers unknown";
