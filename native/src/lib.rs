@@ -7,15 +7,13 @@
 mod alloc;
 pub mod arrow;
 pub mod arrow_states;
-pub mod candump;
 pub mod decoders;
 pub mod hash;
 pub mod json;
 pub mod live;
 pub mod pipeline;
 pub mod pyfloat;
-pub mod rawfile;
-pub mod sniff;
+pub mod sources;
 pub mod tracker;
 pub mod writers;
 

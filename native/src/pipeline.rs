@@ -6,7 +6,6 @@
 //! their answer): memory stays flat at any input size. The output is pulled in batches of
 //! bytes (`next_batch`), which the Python binding hands on without looking inside.
 
-use crate::candump::{BusNamer, CandumpReader};
 use crate::decoders::eg2_can::{CanMemos, Eg2CanDecoder};
 use crate::decoders::eg2_serial::Eg2SerialDecoder;
 use crate::decoders::framing::StreamDecoder;
@@ -15,7 +14,8 @@ use crate::decoders::modbus_rtu::ModbusRtuDecoder;
 use crate::decoders::model::{CanFrame, Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
 use crate::decoders::pairing::Pairer;
 use crate::decoders::registry::detect_protocol;
-use crate::rawfile::{check_readable, BytesReader};
+use crate::sources::candump::{BusNamer, CandumpReader};
+use crate::sources::capture::{check_readable, BytesReader};
 use crate::writers::{make_writer, Format, RecordWriter, TextOptions};
 use std::io;
 use std::path::Path;
@@ -81,7 +81,7 @@ fn suffixes(path: &Path) -> Vec<String> {
 /// `Unsupported` error for what only Python reads (PCAN traces, python-can's formats, MCAP)
 /// or refuses (`.mcap.gz`, `.mf4.gz`: a usage error there).
 pub fn reader_for(path: &Path) -> io::Result<ReaderKind> {
-    match crate::sniff::sniff(path) {
+    match crate::sources::sniff::sniff(path) {
         Some("candump") => return Ok(ReaderKind::Candump),
         Some(other) => {
             return Err(io::Error::new(
