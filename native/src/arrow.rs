@@ -21,7 +21,7 @@
 use crate::arrow_states::{Row, StateColumns};
 use crate::decoders::model::{Record, Value};
 use crate::json::{push_map, push_str, push_value};
-use crate::tracker::Tracker;
+use crate::session::tracker::Tracker;
 use std::sync::{Arc, Mutex};
 
 // -- the schema as Python describes it --------------------------------------------------------

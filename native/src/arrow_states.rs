@@ -11,7 +11,7 @@
 //! refuses too, a bool for an int; the decoders give none).
 
 use crate::arrow::{is_str_list, Buffers, Column, ColumnSpec, Type};
-use crate::tracker::{Changed, Sample, Slot, Values, SLOTS, VALUE_KEYS};
+use crate::session::tracker::{Changed, Sample, Slot, Values, SLOTS, VALUE_KEYS};
 
 /// What a column holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -200,10 +200,10 @@ mod tests {
 
     fn sample(opening: Slot) -> Sample {
         let mut values = Values::default();
-        values.slots[crate::tracker::OPENING] = opening;
+        values.slots[crate::session::tracker::OPENING] = opening;
         values.frames = 3;
         let mut changed = Changed::default();
-        changed.add(crate::tracker::OPENING);
+        changed.add(crate::session::tracker::OPENING);
         Sample {
             t: Some(f64::NAN),
             bus: Arc::from("can0"),

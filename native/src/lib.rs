@@ -10,11 +10,9 @@ pub mod arrow_states;
 pub mod decoders;
 pub mod hash;
 pub mod json;
-pub mod live;
-pub mod pipeline;
 pub mod pyfloat;
+pub mod session;
 pub mod sources;
-pub mod tracker;
 pub mod writers;
 
 #[cfg(feature = "python")]

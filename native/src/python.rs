@@ -12,7 +12,7 @@
 //! tells Python to decode with its own engine instead.
 
 use crate::decoders::model::{EG2_SERIAL, MODBUS_RTU};
-use crate::pipeline::{DecodeOptions, DecodeRun};
+use crate::session::offline_run::{DecodeOptions, DecodeRun};
 use crate::writers::{Format, TextOptions};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyOSError, PyValueError};

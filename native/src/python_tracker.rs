@@ -24,7 +24,7 @@ use crate::decoders::model::{
     MODBUS_RTU, REQUEST, RESPONSE, TRUNCATED,
 };
 use crate::hash::FastMap;
-use crate::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
+use crate::session::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError, PyValueError};
 use pyo3::intern;
 use pyo3::prelude::*;
