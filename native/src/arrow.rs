@@ -877,7 +877,7 @@ impl ArrowTables {
 /// instead of bytes: the Python binding takes the columns out between batches.
 pub struct ArrowWriter(pub Arc<Mutex<ArrowTables>>);
 
-impl crate::writers::RecordWriter for ArrowWriter {
+impl crate::sinks::writers::RecordWriter for ArrowWriter {
     fn write(&mut self, rec: &Record, _out: &mut Vec<u8>) {
         self.0.lock().unwrap_or_else(|e| e.into_inner()).push(rec);
     }

@@ -12,8 +12,8 @@ pub mod hash;
 pub mod json;
 pub mod pyfloat;
 pub mod session;
+pub mod sinks;
 pub mod sources;
-pub mod writers;
 
 #[cfg(feature = "python")]
 mod python;

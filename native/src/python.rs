@@ -13,7 +13,7 @@
 
 use crate::decoders::model::{EG2_SERIAL, MODBUS_RTU};
 use crate::session::offline_run::{DecodeOptions, DecodeRun};
-use crate::writers::{Format, TextOptions};
+use crate::sinks::writers::{Format, TextOptions};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyOSError, PyValueError};
 use pyo3::prelude::*;

@@ -22,7 +22,7 @@ use super::python_frames::FrameBatch;
 use crate::decoders::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
 use crate::hash::FastMap;
 use crate::session::can_stage::LiveCan as Core;
-use crate::writers::{JsonlWriter, RecordWriter};
+use crate::sinks::writers::{JsonlWriter, RecordWriter};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError};
 use pyo3::intern;
 use pyo3::prelude::*;
