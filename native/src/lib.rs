@@ -5,11 +5,10 @@
 //! differential tests (tests/native/) require byte-identical output from both.
 
 mod alloc;
-pub mod arrow;
-pub mod arrow_states;
 pub mod decoders;
 pub mod hash;
 pub mod json;
+pub mod parquet;
 pub mod pyfloat;
 pub mod session;
 pub mod sinks;

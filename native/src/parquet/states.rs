@@ -10,7 +10,7 @@
 //! (floats as they are, NaN included); a value of another type is an error (one `pa.array`
 //! refuses too, a bool for an int; the decoders give none).
 
-use crate::arrow::{is_str_list, Buffers, Column, ColumnSpec, Type};
+use crate::parquet::records::{is_str_list, Buffers, Column, ColumnSpec, Type};
 use crate::session::tracker::{Changed, Sample, Slot, Values, SLOTS, VALUE_KEYS};
 
 /// What a column holds.

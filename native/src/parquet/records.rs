@@ -18,9 +18,9 @@
 //! most rows, and a column with no value in a batch is handed out as "all null", with no
 //! buffer at all.
 
-use crate::arrow_states::{Row, StateColumns};
 use crate::decoders::model::{Record, Value};
 use crate::json::{push_map, push_str, push_value};
+use crate::parquet::states::{Row, StateColumns};
 use crate::session::tracker::Tracker;
 use std::sync::{Arc, Mutex};
 
