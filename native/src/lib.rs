@@ -15,4 +15,4 @@ pub mod sinks;
 pub mod sources;
 
 #[cfg(feature = "python")]
-mod python;
+mod bindings;
