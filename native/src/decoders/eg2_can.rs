@@ -795,7 +795,7 @@ pub struct Eg2CanDecoder {
 }
 
 /// The memoised decodes. A decode does not depend on the bus, so the decoders of all the buses
-/// of a capture can share one set (pipeline.rs does): memory stays bounded however many
+/// of a capture can share one set (offline_run.rs does): memory stays bounded however many
 /// channels a log names. Caches: what they drop changes no output.
 #[derive(Default)]
 pub struct CanMemos {

@@ -2,7 +2,7 @@
 //! (analyzer/fleet/tables.py): the Tracker's samples (tracker.rs) of a decode, with no Python
 //! object per sample.
 //!
-//! As for the records (arrow.rs), Python describes the columns at the start (their names and
+//! As for the records (records.rs), Python describes the columns at the start (their names and
 //! types, from analyzer/fleet/tables.py `STATE_COLUMNS`, one home for them); these builders
 //! fill them in that order. A column is a sample's `bus`, `t`, `device`, `protocol` or `seq`, a
 //! state value by its `VALUE_KEYS` name, or `changed` (the names of the fields the record set).

@@ -21,7 +21,7 @@ use std::sync::Arc;
 pub struct LiveCan {
     /// by bus name, in the order first seen (`Decoding._can`)
     decoders: Vec<(Arc<str>, Eg2CanDecoder)>,
-    /// one set of memos for every bus (a decode does not depend on the bus: pipeline.rs does
+    /// one set of memos for every bus (a decode does not depend on the bus: offline_run.rs does
     /// the same), so memory stays bounded however many buses a session names
     memos: CanMemos,
     linter: TimingLinter,

@@ -387,7 +387,7 @@ impl DecodeRun {
         Self::open_with_writer(path, opts, writer)
     }
 
-    /// `open` with a writer of the caller's instead of `opts.format`'s (arrow.rs: columns for
+    /// `open` with a writer of the caller's instead of `opts.format`'s (parquet/records.rs: columns for
     /// the Parquet output).
     pub fn open_with_writer(
         path: &Path,
@@ -481,7 +481,7 @@ impl DecodeRun {
         true
     }
 
-    /// `next_batch` for a writer that writes no bytes (arrow.rs): decode until at least
+    /// `next_batch` for a writer that writes no bytes (parquet/records.rs): decode until at least
     /// `max_records` more records were written (unless the input ends). False once everything
     /// has been written.
     pub fn next_records(&mut self, out: &mut Vec<u8>, max_records: u64) -> bool {
