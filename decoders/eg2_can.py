@@ -142,10 +142,9 @@ class _Directions:
         self._pending.clear()
 
     def tag(self, aid: int, op: int, data: bytes, t: float | None) -> int:
-        """The direction tag of a read (op 0) or write (op 1) frame; notes requests and
-        answers in the pending table. (One function: it runs for every frame.)"""
-        pending = self._pending
-        pend = pending.get(aid)
+        """The direction tag of a read (op 0) or write (op 1) frame, from its shape and the
+        request pending on its identifier; `_note` keeps the pending table."""
+        pend = self._pending.get(aid)
         if (
             pend is not None
             and t is not None
@@ -174,8 +173,17 @@ class _Directions:
             tag = _TAG_REQUEST
         else:
             return _TAG_NONE
+        self._note(aid, tag, n, data, t, pend)
+        return tag
+
+    def _note(
+        self, aid: int, tag: int, n: int, data: bytes, t: float | None, pend: _Pending | None
+    ) -> None:
+        """A request joins the pending table (nobody answers a broadcast); an answer takes
+        one waiting copy off it."""
+        pending = self._pending
         if tag == _TAG_REQUEST:
-            if aid & 0x3FFF != BROADCAST:  # nobody answers a broadcast
+            if aid & 0x3FFF != BROADCAST:
                 if pend is not None and pend[1] == data and not pend[4]:
                     # the same request again before any answer: a retransmission, one more due
                     pending[aid] = (n, data, t, pend[3] + 1, False)
@@ -188,7 +196,6 @@ class _Directions:
                 pending[aid] = (pend[0], pend[1], pend[2], pend[3] - 1, True)
             else:
                 del pending[aid]
-        return tag
 
 
 def _register_at(address: int) -> Register:
@@ -551,50 +558,16 @@ def _fill(layout: _Layout, data: bytes) -> _Template:
     notes.warnings += layout.warnings
     notes.flags += layout.flags
     if _count_shaped(data):
-        if layout.ambiguity == "read":
-            text = (
-                f"could also be a repeated read request of {_plural(data[0])} "
-                "(taken as the response to the pending request)"
-            )
-        else:
-            text = (
-                f"could also be the response to a write of {_plural(data[0])} "
-                "whose request was not seen"
-            )
-        notes.warn(F.AMBIGUOUS_DIRECTION, text)
-    values: dict[str, int] = {}
+        _note_ambiguity(layout, data[0], notes)
     parts: list[str] = []
     partial: list[dict[str, Any]] = []
-    is_save = False
     head = layout.head
     if head is not None:
-        address = head.can_address + 1
-        partial.append(
-            {"address": address, "byte": f"{data[0]:02X}", "register": head.name, "half": "high"}
-        )
-        parts.append(f"byte {address}=0x{data[0]:02X}")
-    raws = layout.unpack(data, layout.start)
-    i = 0  # a counter is about 10% faster than enumerate here
-    for name, cache in layout.slots:
-        value, text, special = cache[raws[i]]
-        i += 1  # noqa: SIM113
-        values[name] = value
-        parts.append(text)
-        if special is not None:
-            problem, extra, save = special
-            if problem is not None:
-                notes.warn(F.OUT_OF_RANGE, problem)
-            if extra is not None:
-                fields[extra[0]] = extra[1]
-            if save:
-                is_save = True
+        _half_byte(head.can_address + 1, data[0], head.name, "high", parts, partial)
+    values, is_save = _fill_values(layout, data, fields, parts, notes)
     tail = layout.tail
     if tail is not None:
-        address = tail.can_address
-        partial.append(
-            {"address": address, "byte": f"{data[-1]:02X}", "register": tail.name, "half": "low"}
-        )
-        parts.append(f"byte {address}=0x{data[-1]:02X}")
+        _half_byte(tail.can_address, data[-1], tail.name, "low", parts, partial)
     fields["values"] = values
     if partial:
         fields["partial"] = partial
@@ -615,6 +588,58 @@ def _fill(layout: _Layout, data: bytes) -> _Template:
     )
 
 
+def _note_ambiguity(layout: _Layout, count: int, notes: Notes) -> None:
+    """A value-carrying frame shaped like a count could also be the other direction."""
+    if layout.ambiguity == "read":
+        text = (
+            f"could also be a repeated read request of {_plural(count)} "
+            "(taken as the response to the pending request)"
+        )
+    else:
+        text = (
+            f"could also be the response to a write of {_plural(count)} whose request was not seen"
+        )
+    notes.warn(F.AMBIGUOUS_DIRECTION, text)
+
+
+def _half_byte(
+    address: int,
+    byte: int,
+    register: str,
+    half: str,
+    parts: list[str],
+    partial: list[dict[str, Any]],
+) -> None:
+    """One byte of a register whose other half lies outside the frame."""
+    partial.append({"address": address, "byte": f"{byte:02X}", "register": register, "half": half})
+    parts.append(f"byte {address}=0x{byte:02X}")
+
+
+def _fill_values(
+    layout: _Layout, data: bytes, fields: dict[str, Any], parts: list[str], notes: Notes
+) -> tuple[dict[str, int], bool]:
+    """The register values of the frame (and whether one is a parameter save); their texts go
+    to parts, their extra fields to fields."""
+    values: dict[str, int] = {}
+    is_save = False
+    raws = layout.unpack(data, layout.start)
+    i = 0  # a counter is about 10% faster than enumerate here
+    for name, cache in layout.slots:
+        value, text, special = cache[raws[i]]
+        i += 1  # noqa: SIM113
+        values[name] = value
+        parts.append(text)
+        if special is not None:
+            problem, extra, save = special
+            if problem is not None:
+                notes.warn(F.OUT_OF_RANGE, problem)
+            if extra is not None:
+                fields[extra[0]] = extra[1]
+            if save:
+                is_save = True
+    return values, is_save
+
+
 def _build_other(aid: int, data: bytes, tag: int) -> _Template:
     """Frames that carry no register values: read requests, write responses, frames without
     data, and operations 2 and 3."""
@@ -625,37 +650,16 @@ def _build_other(aid: int, data: bytes, tag: int) -> _Template:
     name: str | None = None
     if op == OP_READ and tag == _TAG_REQUEST:
         direction = REQUEST
-        count = data[0]
-        regs = _span_registers(address, count)
-        name = _span_name(regs)
-        fields["length"] = count
-        fields["registers"] = [r.name for r in regs]
-        if n == 8:
-            fields["padded"] = True
-        _span_warnings(address, count, regs, False, notes)
-        summary = f"read {_plural(count)} at {address} ({_span_keys(regs)})"
+        name, summary = _read_request(address, data, fields, notes)
     elif op == OP_WRITE and tag == _TAG_RESPONSE:
         direction = RESPONSE
-        count = data[0]
-        regs = _span_registers(address, count)
-        name = _span_name(regs)
-        fields["written_bytes"] = count
-        fields["registers"] = [r.name for r in regs]
-        if n == 8:
-            fields["padded"] = True
-        summary = f"-> wrote {_plural(count)}"
+        name, summary = _write_response(address, data, fields)
     elif op in (OP_READ, OP_WRITE):  # no data at all
         what = "read" if op == OP_READ else "write"
         notes.error(F.MALFORMED, f"{what} frame without data: neither a request nor a response")
         summary = f"{what} at {address}: no data"
     else:
-        name = OPERATIONS[op]
-        fields["data"] = _hex(data)
-        notes.warn(
-            F.UNDOCUMENTED,
-            f"operation {op} ({OPERATIONS[op]}): the manual gives no payload layout, shown raw",
-        )
-        summary = f"{OPERATIONS[op]} at {address} [{n}] {_hex(data)}".rstrip()
+        name, summary = _raw_operation(op, address, data, fields, notes)
     pair_key = (aid,) if direction is not None else None
     expects = direction == REQUEST and device != BROADCAST
     return (
@@ -675,7 +679,45 @@ def _build_other(aid: int, data: bytes, tag: int) -> _Template:
     )
 
 
+def _read_request(
+    address: int, data: bytes, fields: dict[str, Any], notes: Notes
+) -> tuple[str | None, str]:
+    """Name and summary of a read request; its span goes into fields."""
+    count = data[0]
+    regs = _span_registers(address, count)
+    fields["length"] = count
+    fields["registers"] = [r.name for r in regs]
+    if len(data) == 8:
+        fields["padded"] = True
+    _span_warnings(address, count, regs, False, notes)
+    return _span_name(regs), f"read {_plural(count)} at {address} ({_span_keys(regs)})"
+
+
+def _write_response(address: int, data: bytes, fields: dict[str, Any]) -> tuple[str | None, str]:
+    """Name and summary of a write response; its span goes into fields."""
+    count = data[0]
+    regs = _span_registers(address, count)
+    fields["written_bytes"] = count
+    fields["registers"] = [r.name for r in regs]
+    if len(data) == 8:
+        fields["padded"] = True
+    return _span_name(regs), f"-> wrote {_plural(count)}"
+
+
+def _raw_operation(
+    op: int, address: int, data: bytes, fields: dict[str, Any], notes: Notes
+) -> tuple[str, str]:
+    """Name and summary of operations 2 and 3, whose payload the manual does not lay out."""
+    fields["data"] = _hex(data)
+    notes.warn(
+        F.UNDOCUMENTED,
+        f"operation {op} ({OPERATIONS[op]}): the manual gives no payload layout, shown raw",
+    )
+    return OPERATIONS[op], f"{OPERATIONS[op]} at {address} [{len(data)}] {_hex(data)}".rstrip()
+
+
 def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) -> _Template:
+    """A frame no EG2 sent (or one the device filter leaves out), shown as it is."""
     aid = frame.arbitration_id
     notes = Notes()
     notes.flag(F.FOREIGN)
@@ -684,11 +726,7 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
     fields: dict[str, Any] = {"id": ident, "dlc": length, "extended": extended}
     kind = "extended" if extended else "standard"
     if frame.is_error:
-        text = can_error_text(aid)
-        notes.error(F.CAN_ERROR_FRAME, text)
-        fields["error_class"] = aid
-        fields["data"] = _hex(data)
-        summary = f"{text} [{len(data)}] {_hex(data)}".rstrip()
+        summary = _error_frame(aid, data, fields, notes)
     else:
         if not 0 <= aid <= (MAX_ID if extended else 0x7FF):
             notes.warn(
@@ -700,16 +738,7 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
             notes.warn(F.FOREIGN, "remote frame")
             summary = f"remote {kind} {ident} [{length}]"
         else:
-            if frame.is_fd:
-                fields["fd"] = True
-                kind = "FD " + kind
-            elif len(data) > 8:
-                notes.warn(F.MALFORMED, f"{len(data)} data bytes in a classic CAN frame")
-            elif frame.dlc is not None and frame.dlc != len(data):
-                notes.warn(F.MALFORMED, f"DLC {frame.dlc} with {len(data)} data bytes")
-            elif extended and filtered and 0 <= aid < RESERVED_BIT:
-                fields["eg2_device"] = aid & 0x3FFF  # left out by the decoder's device filter
-            summary = f"{kind} {ident} [{len(data)}] {_hex(data)}".rstrip()
+            summary = _data_frame(frame, data, f"{kind} {ident}", filtered, fields, notes)
         fields["data"] = _hex(data)
     return (
         FOREIGN_CAN,
@@ -726,6 +755,38 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
         False,
         notes.flags,
     )
+
+
+def _error_frame(aid: int, data: bytes, fields: dict[str, Any], notes: Notes) -> str:
+    """Summary of a CAN error frame (aid: its error class); its problem is noted."""
+    text = can_error_text(aid)
+    notes.error(F.CAN_ERROR_FRAME, text)
+    fields["error_class"] = aid
+    fields["data"] = _hex(data)
+    return f"{text} [{len(data)}] {_hex(data)}".rstrip()
+
+
+def _data_frame(
+    frame: CanFrame,
+    data: bytes,
+    title: str,
+    filtered: bool,
+    fields: dict[str, Any],
+    notes: Notes,
+) -> str:
+    """Summary of a foreign data frame (title: its kind and identifier); what does not fit
+    classic CAN is noted."""
+    aid = frame.arbitration_id
+    if frame.is_fd:
+        fields["fd"] = True
+        title = "FD " + title
+    elif len(data) > 8:
+        notes.warn(F.MALFORMED, f"{len(data)} data bytes in a classic CAN frame")
+    elif frame.dlc is not None and frame.dlc != len(data):
+        notes.warn(F.MALFORMED, f"DLC {frame.dlc} with {len(data)} data bytes")
+    elif frame.is_extended and filtered and 0 <= aid < RESERVED_BIT:
+        fields["eg2_device"] = aid & 0x3FFF  # left out by the decoder's device filter
+    return f"{title} [{len(data)}] {_hex(data)}".rstrip()
 
 
 def _from_template(

@@ -423,33 +423,11 @@ _CACHE_MAX: Final = 50_000  # cleared when full: a live bus repeats few frames, 
 def _decode(raw: bytes) -> _Entry:
     """Everything about a frame that depends only on its bytes."""
     if len(raw) < 6 or raw[3] + 5 != len(raw) or raw[:2] not in (REQUEST_HEADER, RESPONSE_HEADER):
-        # the framer only hands over well-framed bytes; this guards direct callers
-        error = f"malformed frame: {len(raw)} bytes do not fit a header and its length byte"
-        return (
-            None,
-            None,
-            None,
-            None,
-            {"data": _hex(raw)},
-            "malformed frame",
-            (error,),
-            (),
-            None,
-            False,
-            False,
-            (F.MALFORMED,),
-        )
+        return _malformed(raw)  # the framer only hands over well-framed bytes
     direction = REQUEST if raw[0] == 0xEB else RESPONSE
     device, code, data = raw[2], raw[4], raw[5:-1]
     notes = Notes()
-    # the header's problems come first
-    expected, got = sum(raw[2:-1]) & 0xFF, raw[-1]
-    if expected != got:
-        notes.error(F.BAD_CHECKSUM, f"checksum error: expected 0x{expected:02X}, got 0x{got:02X}")
-    if device == 0:
-        notes.warn(F.INVALID_ID, "ID 0 is not a valid ID")
-    elif device == BROADCAST and direction == RESPONSE:
-        notes.warn(F.BROADCAST, "response from broadcast ID 255 (broadcasts get no response)")
+    _note_header(raw, direction, notes)  # the header's problems come first
     entry = _DISPATCH.get((direction, code))
     if entry is None:
         name, alias = f"UNKNOWN_0x{code:02X}", None
@@ -474,6 +452,37 @@ def _decode(raw: bytes) -> _Entry:
         direction == REQUEST and code == Cmd.PARA_SAVE,
         tuple(notes.flags),
     )
+
+
+def _malformed(raw: bytes) -> _Entry:
+    """The entry of bytes that do not fit a header and its length byte (direct callers)."""
+    error = f"malformed frame: {len(raw)} bytes do not fit a header and its length byte"
+    return (
+        None,
+        None,
+        None,
+        None,
+        {"data": _hex(raw)},
+        "malformed frame",
+        (error,),
+        (),
+        None,
+        False,
+        False,
+        (F.MALFORMED,),
+    )
+
+
+def _note_header(raw: bytes, direction: str, notes: Notes) -> None:
+    """The header's problems: a checksum that fails, an invalid or broadcast ID."""
+    device = raw[2]
+    expected, got = sum(raw[2:-1]) & 0xFF, raw[-1]
+    if expected != got:
+        notes.error(F.BAD_CHECKSUM, f"checksum error: expected 0x{expected:02X}, got 0x{got:02X}")
+    if device == 0:
+        notes.warn(F.INVALID_ID, "ID 0 is not a valid ID")
+    elif device == BROADCAST and direction == RESPONSE:
+        notes.warn(F.BROADCAST, "response from broadcast ID 255 (broadcasts get no response)")
 
 
 # Records are built positionally: keyword construction of the 22-field dataclass costs 2.5x as

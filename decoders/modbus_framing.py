@@ -132,6 +132,35 @@ def crc_state(buf: bytes | bytearray, pos: int, end: int) -> int:
     return CRC_SWAPPED_ORDER if got == ((c >> 8) | (c & 0xFF) << 8) else CRC_BAD
 
 
+def _first_holding(states: list[int | None], final: bool) -> int | None:
+    """Index of the first reading whose CRC holds, -1 if none does; None while a reading
+    preferred to it is not complete yet."""
+    for i, state in enumerate(states):
+        if state is None:
+            if not final:
+                return None
+        elif state:
+            return i
+    return -1
+
+
+def _contenders(
+    cands: list[int], states: list[int | None], best: int, rivals: bool, final: bool
+) -> list[int] | None:
+    """The holding reading cands[best] and the later readings close enough to rival it that
+    hold too; None while such a rival is not complete yet."""
+    length = cands[best]
+    contenders = [length]
+    for c, state in zip(cands[best + 1 :], states[best + 1 :], strict=True):
+        if rivals and (c < 0 or abs(c - length) <= CLOSE):
+            if state is None:
+                if not final:
+                    return None
+            elif state:
+                contenders.append(c)
+    return contenders
+
+
 class ModbusFramer(ByteStreamDecoder):
     """The framing half of the Modbus RTU decoder: ``frame_at`` and what it needs. The
     decoder keeps ``_pending`` (the request awaiting its response) up to date."""
@@ -157,78 +186,103 @@ class ModbusFramer(ByteStreamDecoder):
             return 0
         if pos + 1 >= n:
             return NEED_MORE
-        fc = buf[pos + 1]
-        kind = KIND[fc]
+        kind = KIND[buf[pos + 1]]
         if kind in (KIND_SINGLE, KIND_EXCEPTION):  # one shape, either direction
-            first = 8 if kind == KIND_SINGLE else 5
-            end = pos + first
-            if end <= n:
-                c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
-                got = buf[end - 2] | buf[end - 1] << 8
-                if got == c:
-                    return first
-                if got == ((c >> 8) | (c & 0xFF) << 8):
-                    self._swapped = (self._base + pos, first)  # for make_record
-                    return first
-            return self._decide(buf, pos, n, final, [first], False)
+            return self._one_shape_at(buf, pos, n, final, 8 if kind == KIND_SINGLE else 5)
         if not kind:
             return 0
         hint = self.direction_hint
+        first, second = self._two_readings(buf, pos, n, kind, hint)
+        length = self._expected_reading(buf, pos, n, final, first, second, hint)
+        if length is not None:
+            return length
+        cands = [first] if second == 0 else [first, second]
+        return self._decide(buf, pos, n, final, cands, hint is None)
+
+    def _one_shape_at(self, buf: bytearray, pos: int, n: int, final: bool, length: int) -> int:
+        """frame_at for a function with one frame length in either direction."""
+        end = pos + length
+        if end <= n:
+            c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
+            got = buf[end - 2] | buf[end - 1] << 8
+            if got == c:
+                return length
+            if got == ((c >> 8) | (c & 0xFF) << 8):
+                self._swapped = (self._base + pos, length)  # for make_record
+                return length
+        return self._decide(buf, pos, n, final, [length], False)
+
+    def _two_readings(
+        self, buf: bytearray, pos: int, n: int, kind: int, hint: str | None
+    ) -> tuple[int, int]:
+        """The two candidate lengths, preferred first, as candidates() orders them (inlined:
+        this runs once per frame); second == 0: none, -1: its length is not known yet."""
         if hint is None:
             p = self._pending
             resp_first = p is not None and p[0] == buf[pos]
         else:
             resp_first = hint == RESPONSE
-        # the two candidates, preferred first, as candidates() orders them (inlined: this
-        # runs once per frame); second == 0: none, -1: its length is not known yet
+        fc = buf[pos + 1]
         if kind == KIND_READ:
             if pos + 2 < n:
                 bc = buf[pos + 2]
                 other = 0 if bc == 0 or (fc >= READ_HOLDING and bc & 1) or bc == 3 else 5 + bc
             else:
                 other = -1
-            if resp_first and other:
-                first, second = other, 8
-            else:
-                first, second = 8, other
+            return (other, 8) if resp_first and other else (8, other)
+        if pos + 6 < n:
+            other = write_request_len(fc, buf[pos + 4] << 8 | buf[pos + 5], buf[pos + 6])
         else:
-            if pos + 6 < n:
-                other = write_request_len(fc, buf[pos + 4] << 8 | buf[pos + 5], buf[pos + 6])
-            else:
-                other = -1
-            if resp_first or not other:
-                first, second = 8, other
-            else:
-                first, second = other, 8
-        # the common case: the expected shape checks, and no other reading is close enough
-        # to it to collide (see _decide) or that reading fails its CRC; a known direction
-        # settles the reading by itself
+            other = -1
+        return (8, other) if resp_first or not other else (other, 8)
+
+    def _expected_reading(
+        self,
+        buf: bytearray,
+        pos: int,
+        n: int,
+        final: bool,
+        first: int,
+        second: int,
+        hint: str | None,
+    ) -> int | None:
+        """The common case: the expected shape checks, and no other reading is close enough
+        to it to collide (see _decide) or that reading fails its CRC; a known direction
+        settles the reading by itself. None when this does not settle it."""
         end = pos + first
-        if first > 0 and end <= n:
-            c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
-            got = buf[end - 2] | buf[end - 1] << 8
-            if got == c or got == ((c >> 8) | (c & 0xFF) << 8):
-                d = second - first
-                if second > 0 and hint is None and -CLOSE <= d <= CLOSE:
-                    # a close reading: does it hold too? (then _decide settles it)
-                    if d > 0 and got == c:
-                        # exact shortcut: this frame's CRC residue is 0, so a reading d bytes
-                        # longer holds exactly when the d bytes after it are 00
-                        if end + d > n:
-                            if not final:
-                                return NEED_MORE
-                        elif not buf[end] and (d == 1 or not buf[end + 1]):
-                            return self._decide(buf, pos, n, final, [first, second], True)
-                    elif pos + second > n:
-                        if not final:
-                            return NEED_MORE
-                    elif crc_state(buf, pos, pos + second):
-                        return self._decide(buf, pos, n, final, [first, second], True)
-                if got != c:
-                    self._swapped = (self._base + pos, first)  # for make_record
-                return first
-        cands = [first] if second == 0 else [first, second]
-        return self._decide(buf, pos, n, final, cands, hint is None)
+        if first <= 0 or end > n:
+            return None
+        c = _crc(buf[pos : end - 2], 0xFFFF, _TABLE)
+        got = buf[end - 2] | buf[end - 1] << 8
+        if got != c and got != ((c >> 8) | (c & 0xFF) << 8):
+            return None
+        d = second - first
+        if second > 0 and hint is None and -CLOSE <= d <= CLOSE:
+            rival = self._close_reading_holds(buf, pos, n, final, end, second, got == c)
+            if rival is None:
+                return NEED_MORE
+            if rival:  # then _decide settles it
+                return self._decide(buf, pos, n, final, [first, second], True)
+        if got != c:
+            self._swapped = (self._base + pos, first)  # for make_record
+        return first
+
+    @staticmethod
+    def _close_reading_holds(
+        buf: bytearray, pos: int, n: int, final: bool, end: int, second: int, exact: bool
+    ) -> bool | None:
+        """Does the close reading of length second hold its CRC too, beside the one ending at
+        end? None when that needs more bytes."""
+        d = pos + second - end
+        if d > 0 and exact:
+            # exact shortcut: this frame's CRC residue is 0, so a reading d bytes longer holds
+            # exactly when the d bytes after it are 00
+            if end + d > n:
+                return None if not final else False
+            return not buf[end] and (d == 1 or not buf[end + 1])
+        if pos + second > n:
+            return None if not final else False
+        return crc_state(buf, pos, pos + second) != CRC_BAD
 
     def _decide(
         self, buf: bytearray, pos: int, n: int, final: bool, cands: list[int], rivals: bool
@@ -243,34 +297,35 @@ class ModbusFramer(ByteStreamDecoder):
         a timing gap or the end of the stream) wins; failing that, the expected one.
         """
         states = [None if c < 0 or pos + c > n else crc_state(buf, pos, pos + c) for c in cands]
-        best = -1
-        for i, state in enumerate(states):
-            if state is None:
-                if not final:
-                    return NEED_MORE  # a preferred reading is not complete yet
-            elif state:
-                best = i
-                break
-        if best >= 0:
-            length = cands[best]
-            contenders = [length]
-            for c, state in zip(cands[best + 1 :], states[best + 1 :], strict=True):
-                if rivals and (c < 0 or abs(c - length) <= CLOSE):
-                    if state is None:
-                        if not final:
-                            return NEED_MORE
-                    elif state:
-                        contenders.append(c)
-            if len(contenders) > 1:
-                length = self._settle(buf, pos, n, final, contenders, cands[0])
-                if length == NEED_MORE:
-                    return NEED_MORE
-            if states[cands.index(length)] == CRC_SWAPPED_ORDER:
-                self._swapped = (self._base + pos, length)
-            return length
-        # every candidate failed its CRC, or the stream ended: the first candidate cut off by
-        # the end makes a truncated frame (the base reports it on NEED_MORE when final); a bad
-        # CRC makes a frame only where one plausibly ends
+        best = _first_holding(states, final)
+        if best is None:
+            return NEED_MORE
+        if best < 0:
+            return self._damaged_reading(buf, pos, n, final, cands, states)
+        contenders = _contenders(cands, states, best, rivals, final)
+        if contenders is None:
+            return NEED_MORE
+        length = contenders[0]
+        if len(contenders) > 1:
+            length = self._settle(buf, pos, n, final, contenders, cands[0])
+            if length == NEED_MORE:
+                return NEED_MORE
+        if states[cands.index(length)] == CRC_SWAPPED_ORDER:
+            self._swapped = (self._base + pos, length)
+        return length
+
+    def _damaged_reading(
+        self,
+        buf: bytearray,
+        pos: int,
+        n: int,
+        final: bool,
+        cands: list[int],
+        states: list[int | None],
+    ) -> int:
+        """Every candidate failed its CRC, or the stream ended: the first candidate cut off by
+        the end makes a truncated frame (the base reports it on NEED_MORE when final); a bad
+        CRC makes a frame only where one plausibly ends."""
         for c, state in zip(cands, states, strict=True):
             if state is None:
                 return NEED_MORE

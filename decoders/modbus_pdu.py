@@ -188,44 +188,20 @@ def _decode(raw: bytes, pending: Pending | None, hint: str | None, crc: int | No
     if shapeless is not None:
         return shapeless
     notes = Notes()
-    n = len(raw)
     slave, fc = raw[0], raw[1]
     func = fc & 0x7F
     kind = KIND[fc]
     if crc is None:
-        crc = crc_state(raw, 0, n)
-    if crc == CRC_SWAPPED_ORDER:
-        notes.warn(F.SWAPPED_CRC, CRC_SWAPPED)
-    elif crc == CRC_BAD:
-        c = crc16(raw[:-2])
-        notes.error(
-            F.BAD_CHECKSUM,
-            f"CRC error: expected {c & 0xFF:02X} {c >> 8:02X}, got {raw[-2]:02X} {raw[-1]:02X}",
-        )
+        crc = crc_state(raw, 0, len(raw))
+    _note_crc(raw, crc, notes)
     direction = _direction(raw, pending, hint)
-    if kind != KIND_EXCEPTION and fc not in EG2_FUNCTIONS:
-        notes.warn(
-            F.UNDOCUMENTED,
-            f"function {fc} ({FUNCTION_TEXT[fc]}) is not one the EG2 documents (3, 6 and 16)",
-        )
-    if direction == RESPONSE and slave == BROADCAST:
-        notes.warn(F.BROADCAST, "response from address 0 (broadcast requests get no response)")
+    _note_unexpected(raw, kind, direction, notes)
     # a response is checked against the request it answers
     answers = pending is not None and pending[0] == slave and pending[1] == func
     req = pending if direction == RESPONSE and answers else None
     fields: dict[str, Any] = {"slave": slave, "function": func}
     name, summary, is_save = _body(raw, kind, direction, req, fields, notes)
-    if direction == REQUEST:
-        pair_key: tuple[int, int] | None = (slave, fc)
-        expects = slave != BROADCAST
-        nxt: Pending | None = None
-        if expects:
-            nxt = (slave, fc, raw[2] << 8 | raw[3], raw[4] << 8 | raw[5], crc != CRC_BAD)
-    else:
-        pair_key = (slave, func) if direction == RESPONSE else None
-        expects = False
-        nxt = None
-        is_save = False
+    pair_key, expects, nxt = _pairing(raw, direction, crc)
     return (
         direction,
         name,
@@ -235,9 +211,49 @@ def _decode(raw: bytes, pending: Pending | None, hint: str | None, crc: int | No
         tuple(notes.warnings),
         pair_key,
         expects,
-        is_save,
+        is_save and direction == REQUEST,
         nxt,
         tuple(notes.flags),
+    )
+
+
+def _note_crc(raw: bytes, crc: int, notes: Notes) -> None:
+    """A CRC that fails, or holds with its two bytes swapped, is noted."""
+    if crc == CRC_SWAPPED_ORDER:
+        notes.warn(F.SWAPPED_CRC, CRC_SWAPPED)
+    elif crc == CRC_BAD:
+        c = crc16(raw[:-2])
+        notes.error(
+            F.BAD_CHECKSUM,
+            f"CRC error: expected {c & 0xFF:02X} {c >> 8:02X}, got {raw[-2]:02X} {raw[-1]:02X}",
+        )
+
+
+def _note_unexpected(raw: bytes, kind: int, direction: str | None, notes: Notes) -> None:
+    """A function the EG2 does not document, or a response from the broadcast address."""
+    slave, fc = raw[0], raw[1]
+    if kind != KIND_EXCEPTION and fc not in EG2_FUNCTIONS:
+        notes.warn(
+            F.UNDOCUMENTED,
+            f"function {fc} ({FUNCTION_TEXT[fc]}) is not one the EG2 documents (3, 6 and 16)",
+        )
+    if direction == RESPONSE and slave == BROADCAST:
+        notes.warn(F.BROADCAST, "response from address 0 (broadcast requests get no response)")
+
+
+def _pairing(
+    raw: bytes, direction: str | None, crc: int
+) -> tuple[tuple[int, int] | None, bool, Pending | None]:
+    """(pair key, expects a response, the request now pending) of a frame."""
+    slave, fc = raw[0], raw[1]
+    if direction != REQUEST:
+        return ((slave, fc & 0x7F) if direction == RESPONSE else None), False, None
+    if slave == BROADCAST:
+        return (slave, fc), False, None
+    return (
+        (slave, fc),
+        True,
+        (slave, fc, raw[2] << 8 | raw[3], raw[4] << 8 | raw[5], crc != CRC_BAD),
     )
 
 

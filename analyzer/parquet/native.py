@@ -1,5 +1,5 @@
 """``eg2scope decode --format parquet`` on the native core: the core builds the Arrow columns of
-its records itself (native/src/arrow.rs, in ``PARSE_SCHEMA``'s layout: no JSON), and they go to
+its records itself (native/src/parquet/records.rs, ``PARSE_SCHEMA``'s layout, no JSON); they go to
 ``ParquetRecordWriter.write_parsed`` (analyzer/parquet/writer.py), the Python engine's own
 flattening and writing: the same Parquet from both engines (tests/native/test_native_parquet.py).
 

@@ -6,7 +6,7 @@ flagged) and its fault marks (records with errors or fault flags).
 
 ``log_rows`` takes a list of Records (this module's loop, the reference) or a native
 ``RecordBatch``, which the native core reads without making a Record per record
-(``rerun_log_rows``, native/src/python_rerun.rs; tests/rerun require the same rows). A
+(``rerun_log_rows``, native/src/bindings/python_rerun.rs; tests/rerun require the same rows). A
 warning-heavy capture shows most of its records in the logs.
 """
 

@@ -16,7 +16,7 @@
 A log's relative stamps are ``-td`` deltas when one of them in the first 64 KiB is smaller than
 the one before it (``-tz`` stamps never go back); ``-L`` stamps are always Unix time.
 
-native/src/candump.rs mirrors this module line by line: the same frames and the same error
+native/src/sources/candump.rs mirrors this module line by line: the same frames and the same error
 texts from both engines.
 """
 

@@ -3,7 +3,7 @@ as ``.txt`` or with no suffix at all is still a candump log, and a ``.log`` may 
 trace. Binary formats by their magic (MCAP, BLF ``LOGG``, MF4 ``MDF``), text logs by their first
 line that is not blank or a comment. ``None``: nothing recognised (the suffix decides).
 
-native/src/sniff.rs mirrors this module: both engines choose the same reader.
+native/src/sources/sniff.rs mirrors this module: both engines choose the same reader.
 """
 
 from __future__ import annotations

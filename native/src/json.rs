@@ -5,7 +5,7 @@
 //! so strings are scanned 8 bytes at a time and clean runs are copied at once, and integers
 //! are formatted with a two-digit table instead of `core::fmt`.
 
-use crate::model::Value;
+use crate::decoders::model::Value;
 use crate::pyfloat::push_json_float;
 
 const ONES: u64 = 0x0101_0101_0101_0101;
@@ -190,7 +190,7 @@ pub fn push_value(out: &mut String, v: &Value) {
     }
 }
 
-pub fn push_map(out: &mut String, entries: &[(crate::model::Str, Value)]) {
+pub fn push_map(out: &mut String, entries: &[(crate::decoders::model::Str, Value)]) {
     out.push('{');
     for (i, (k, v)) in entries.iter().enumerate() {
         if i > 0 {

@@ -5,28 +5,14 @@
 //! differential tests (tests/native/) require byte-identical output from both.
 
 mod alloc;
-pub mod arrow;
-pub mod arrow_states;
-pub mod can;
-pub mod candump;
-pub mod detect;
-pub mod flags;
-pub mod framing;
+pub mod decoders;
 pub mod hash;
 pub mod json;
-pub mod lint;
-pub mod live;
-pub mod modbus;
-pub mod model;
-pub mod pairing;
-pub mod pipeline;
+pub mod parquet;
 pub mod pyfloat;
-pub mod rawfile;
-pub mod registers;
-pub mod serial;
-pub mod sniff;
-pub mod tracker;
-pub mod writers;
+pub mod session;
+pub mod sinks;
+pub mod sources;
 
 #[cfg(feature = "python")]
-mod python;
+mod bindings;

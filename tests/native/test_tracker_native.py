@@ -1,6 +1,7 @@
-"""The native state tracker (``analyzer._native.Tracker``, native/src/tracker.rs) against the
-Python one (analyzer/session/tracker.py): the same records folded by both must give equal state
-samples (dataclass equality, and the same key order in ``changed`` and ``values``), byte-identical
+"""The native state tracker (``analyzer._native.Tracker``, native/src/session/tracker.rs) against
+the Python one (analyzer/session/tracker.py): the same records folded by both must give equal
+state samples (dataclass equality, and the same key order in ``changed`` and ``values``),
+byte-identical
 ``messages()`` (``orjson.dumps(sample.to_dict(), default=json_default)``), the same times and
 keys, and equal device states, batch after batch.
 

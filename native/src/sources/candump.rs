@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 
 use flate2::{Crc, Decompress, FlushDecompress, Status};
 
-use crate::model::CanFrame;
+use crate::decoders::model::CanFrame;
 
 /// errors listed per file; `bad_lines` counts them all
 pub const MAX_ERRORS: usize = 100;

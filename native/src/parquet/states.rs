@@ -2,7 +2,7 @@
 //! (analyzer/fleet/tables.py): the Tracker's samples (tracker.rs) of a decode, with no Python
 //! object per sample.
 //!
-//! As for the records (arrow.rs), Python describes the columns at the start (their names and
+//! As for the records (records.rs), Python describes the columns at the start (their names and
 //! types, from analyzer/fleet/tables.py `STATE_COLUMNS`, one home for them); these builders
 //! fill them in that order. A column is a sample's `bus`, `t`, `device`, `protocol` or `seq`, a
 //! state value by its `VALUE_KEYS` name, or `changed` (the names of the fields the record set).
@@ -10,8 +10,8 @@
 //! (floats as they are, NaN included); a value of another type is an error (one `pa.array`
 //! refuses too, a bool for an int; the decoders give none).
 
-use crate::arrow::{is_str_list, Buffers, Column, ColumnSpec, Type};
-use crate::tracker::{Changed, Sample, Slot, Values, SLOTS, VALUE_KEYS};
+use crate::parquet::records::{is_str_list, Buffers, Column, ColumnSpec, Type};
+use crate::session::tracker::{Changed, Sample, Slot, Values, SLOTS, VALUE_KEYS};
 
 /// What a column holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -200,10 +200,10 @@ mod tests {
 
     fn sample(opening: Slot) -> Sample {
         let mut values = Values::default();
-        values.slots[crate::tracker::OPENING] = opening;
+        values.slots[crate::session::tracker::OPENING] = opening;
         values.frames = 3;
         let mut changed = Changed::default();
-        changed.add(crate::tracker::OPENING);
+        changed.add(crate::session::tracker::OPENING);
         Sample {
             t: Some(f64::NAN),
             bus: Arc::from("can0"),

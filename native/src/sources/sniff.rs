@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::candump::{first_bytes, parses_as_candump, BOM, HEAD_SIZE};
+use crate::sources::candump::{first_bytes, parses_as_candump, BOM, HEAD_SIZE};
 
 /// sniff.py `LINES`: lines looked at for the first significant one.
 const LINES: usize = 32;

@@ -11,17 +11,17 @@
 //! interned (one `Arc` per name), which the pairer's and linter's stream numbering relies on
 //! for speed (`Arc::ptr_eq` before comparing text).
 
-use crate::can::{CanMemos, Eg2CanDecoder};
-use crate::lint::TimingLinter;
-use crate::model::{CanFrame, Record};
-use crate::pairing::Pairer;
+use crate::decoders::eg2_can::{CanMemos, Eg2CanDecoder};
+use crate::decoders::lint::TimingLinter;
+use crate::decoders::model::{CanFrame, Record};
+use crate::decoders::pairing::Pairer;
 use std::sync::Arc;
 
 /// `Decoding` for CAN frames: frames in, records out in stream order.
 pub struct LiveCan {
     /// by bus name, in the order first seen (`Decoding._can`)
     decoders: Vec<(Arc<str>, Eg2CanDecoder)>,
-    /// one set of memos for every bus (a decode does not depend on the bus: pipeline.rs does
+    /// one set of memos for every bus (a decode does not depend on the bus: offline_run.rs does
     /// the same), so memory stays bounded however many buses a session names
     memos: CanMemos,
     linter: TimingLinter,
@@ -119,8 +119,8 @@ impl LiveCan {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::flags::{CUT_OFF, ORPHAN_RESPONSE, UNANSWERED};
-    use crate::model::{EG2_CAN, FOREIGN_CAN, REQUEST, RESPONSE};
+    use crate::decoders::flags::{CUT_OFF, ORPHAN_RESPONSE, UNANSWERED};
+    use crate::decoders::model::{EG2_CAN, FOREIGN_CAN, REQUEST, RESPONSE};
 
     fn frame(t: Option<f64>, aid: u32, data: &[u8]) -> CanFrame {
         CanFrame {

@@ -19,8 +19,8 @@
 //! `self.direction_hint` and `self.gap_at`. The hooks must be called in the same order as the
 //! Python calls them, since a protocol may keep state in them (Modbus remembers a swapped CRC).
 
-use crate::flags;
-use crate::model::{Record, GARBAGE, TRUNCATED};
+use crate::decoders::flags;
+use crate::decoders::model::{Record, GARBAGE, TRUNCATED};
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -532,7 +532,7 @@ impl<P: Framing> StreamDecoder for ByteStreamDecoder<P> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::FRAME;
+    use crate::decoders::model::FRAME;
 
     /// A toy protocol: `AA len payload sum` (len = payload bytes, sum = payload sum & 0xFF).
     struct Toy;

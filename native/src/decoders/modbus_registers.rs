@@ -11,9 +11,11 @@ use std::borrow::Cow;
 use std::rc::Rc;
 use std::sync::OnceLock;
 
-use crate::flags as F;
-use crate::model::{Fields, Notes, Str, Value};
-use crate::registers::{by_modbus, by_number, is_save_register, RegRef, Register, FIRST, LAST};
+use crate::decoders::flags as F;
+use crate::decoders::model::{Fields, Notes, Str, Value};
+use crate::decoders::registers::{
+    by_modbus, by_number, is_save_register, RegRef, Register, FIRST, LAST,
+};
 
 pub const SHORT_NOTE: &str = "the host leaves out the 1000 offset, as some clients do";
 

@@ -11,9 +11,9 @@
 //! named); an input or an option the native core does not handle raises `Unsupported`, which
 //! tells Python to decode with its own engine instead.
 
-use crate::model::{EG2_SERIAL, MODBUS_RTU};
-use crate::pipeline::{DecodeOptions, DecodeRun};
-use crate::writers::{Format, TextOptions};
+use crate::decoders::model::{EG2_SERIAL, MODBUS_RTU};
+use crate::session::offline_run::{DecodeOptions, DecodeRun};
+use crate::sinks::writers::{Format, TextOptions};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyOSError, PyValueError};
 use pyo3::prelude::*;

@@ -14,12 +14,12 @@ use std::collections::HashSet;
 use std::fmt::Write;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use crate::flags as F;
-use crate::model::{
+use crate::decoders::flags as F;
+use crate::decoders::model::{
     CanFrame, Fields, PairKey, Record, SharedFields, Str, Text, Value, EG2_CAN, FOREIGN_CAN, FRAME,
 };
-use crate::model::{REQUEST, RESPONSE};
-use crate::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
+use crate::decoders::model::{REQUEST, RESPONSE};
+use crate::decoders::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
 
 pub const OPERATIONS: [&str; 4] = ["read", "write", "positioning move", "servo follow"];
 pub const OP_READ: u32 = 0;
@@ -125,8 +125,8 @@ struct Directions {
 }
 
 impl Directions {
-    /// The direction tag of a read (op 0) or write (op 1) frame (of at most 8 bytes); notes
-    /// requests and answers in the pending table.
+    /// The direction tag of a read (op 0) or write (op 1) frame (of at most 8 bytes), from its
+    /// shape and the request pending on its identifier; `note` keeps the pending table.
     fn tag(&mut self, aid: u32, op: u32, data: &[u8], t: Option<f64>) -> u32 {
         let mut pend = self.pending.get(&aid).copied();
         if let (Some(p), Some(t)) = (pend, t) {
@@ -159,6 +159,21 @@ impl Directions {
         } else {
             return TAG_NONE;
         }
+        self.note(aid, tag, n, data, t, pend);
+        tag
+    }
+
+    /// A request joins the pending table (nobody answers a broadcast); an answer takes one
+    /// waiting copy off it (`_note`).
+    fn note(
+        &mut self,
+        aid: u32,
+        tag: u32,
+        n: usize,
+        data: &[u8],
+        t: Option<f64>,
+        pend: Option<Pending>,
+    ) {
         if tag == TAG_REQUEST {
             if aid & 0x3FFF != BROADCAST {
                 let mut buf = [0u8; 8];
@@ -198,7 +213,6 @@ impl Directions {
                 self.pending.remove(&aid);
             }
         }
-        tag
     }
 }
 
@@ -559,27 +573,10 @@ fn build_other(aid: u32, data: &[u8], tag: u32) -> Template {
     let summary;
     if op == OP_READ && tag == TAG_REQUEST {
         direction = Some(REQUEST);
-        let count = data[0] as usize;
-        let regs = span_registers(address as i64, count as i64);
-        name = span_name(&regs);
-        fields.push((Cow::Borrowed("length"), Value::Int(count as i64)));
-        fields.push((Cow::Borrowed("registers"), register_names(&regs)));
-        if n == 8 {
-            fields.push((Cow::Borrowed("padded"), Value::Bool(true)));
-        }
-        span_warnings(address as i64, count as i64, &regs, false, &mut notes);
-        summary = format!("read {} at {address} ({})", plural(count), span_keys(&regs));
+        (name, summary) = read_request(address as i64, data, &mut fields, &mut notes);
     } else if op == OP_WRITE && tag == TAG_RESPONSE {
         direction = Some(RESPONSE);
-        let count = data[0] as usize;
-        let regs = span_registers(address as i64, count as i64);
-        name = span_name(&regs);
-        fields.push((Cow::Borrowed("written_bytes"), Value::Int(count as i64)));
-        fields.push((Cow::Borrowed("registers"), register_names(&regs)));
-        if n == 8 {
-            fields.push((Cow::Borrowed("padded"), Value::Bool(true)));
-        }
-        summary = format!("-> wrote {}", plural(count));
+        (name, summary) = write_response(address as i64, data, &mut fields);
     } else if op == OP_READ || op == OP_WRITE {
         // no data at all
         let what = if op == OP_READ { "read" } else { "write" };
@@ -589,16 +586,7 @@ fn build_other(aid: u32, data: &[u8], tag: u32) -> Template {
         );
         summary = format!("{what} at {address}: no data");
     } else {
-        let opname = OPERATIONS[op as usize];
-        name = Some(Cow::Borrowed(opname));
-        fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
-        notes.warn(
-            F::UNDOCUMENTED,
-            format!("operation {op} ({opname}): the manual gives no payload layout, shown raw"),
-        );
-        let mut s = format!("{opname} at {address} [{n}] ");
-        push_hex(&mut s, data);
-        summary = s.trim_end().to_string();
+        (name, summary) = raw_operation(op, address, data, &mut fields, &mut notes);
     }
     Template {
         protocol: EG2_CAN,
@@ -617,6 +605,57 @@ fn build_other(aid: u32, data: &[u8], tag: u32) -> Template {
     }
 }
 
+/// Name and summary of a read request; its span goes into fields (`_read_request`).
+fn read_request(
+    address: i64,
+    data: &[u8],
+    fields: &mut Fields,
+    notes: &mut Notes,
+) -> (Option<Str>, String) {
+    let count = data[0] as usize;
+    let regs = span_registers(address, count as i64);
+    fields.push((Cow::Borrowed("length"), Value::Int(count as i64)));
+    fields.push((Cow::Borrowed("registers"), register_names(&regs)));
+    if data.len() == 8 {
+        fields.push((Cow::Borrowed("padded"), Value::Bool(true)));
+    }
+    span_warnings(address, count as i64, &regs, false, notes);
+    let summary = format!("read {} at {address} ({})", plural(count), span_keys(&regs));
+    (span_name(&regs), summary)
+}
+
+/// Name and summary of a write response; its span goes into fields (`_write_response`).
+fn write_response(address: i64, data: &[u8], fields: &mut Fields) -> (Option<Str>, String) {
+    let count = data[0] as usize;
+    let regs = span_registers(address, count as i64);
+    fields.push((Cow::Borrowed("written_bytes"), Value::Int(count as i64)));
+    fields.push((Cow::Borrowed("registers"), register_names(&regs)));
+    if data.len() == 8 {
+        fields.push((Cow::Borrowed("padded"), Value::Bool(true)));
+    }
+    (span_name(&regs), format!("-> wrote {}", plural(count)))
+}
+
+/// Name and summary of operations 2 and 3, whose payload the manual does not lay out
+/// (`_raw_operation`).
+fn raw_operation(
+    op: u32,
+    address: u32,
+    data: &[u8],
+    fields: &mut Fields,
+    notes: &mut Notes,
+) -> (Option<Str>, String) {
+    let opname = OPERATIONS[op as usize];
+    fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
+    notes.warn(
+        F::UNDOCUMENTED,
+        format!("operation {op} ({opname}): the manual gives no payload layout, shown raw"),
+    );
+    let mut s = format!("{opname} at {address} [{}] ", data.len());
+    push_hex(&mut s, data);
+    (Some(Cow::Borrowed(opname)), s.trim_end().to_string())
+}
+
 /// Python's `str.rstrip()` of an ASCII summary.
 fn rstrip(mut s: String) -> String {
     let keep = s.trim_end().len();
@@ -624,6 +663,8 @@ fn rstrip(mut s: String) -> String {
     s
 }
 
+/// A frame no EG2 sent (or one the device filter leaves out), shown as it is
+/// (`_build_foreign`).
 fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
     let aid = frame.arbitration_id;
     let data = &frame.data[..];
@@ -640,16 +681,10 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
         (Cow::Borrowed("dlc"), Value::Int(length as i64)),
         (Cow::Borrowed("extended"), Value::Bool(extended)),
     ];
-    let mut kind: Str = Cow::Borrowed(if extended { "extended" } else { "standard" });
+    let kind = if extended { "extended" } else { "standard" };
     let summary;
     if frame.is_error {
-        let text = can_error_text(aid);
-        notes.error(F::CAN_ERROR_FRAME, text.clone());
-        fields.push((Cow::Borrowed("error_class"), Value::Int(aid as i64)));
-        fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
-        let mut s = format!("{text} [{}] ", data.len());
-        push_hex(&mut s, data);
-        summary = rstrip(s);
+        summary = error_frame(aid, data, &mut fields, &mut notes);
     } else {
         let limit = if extended { MAX_ID } else { 0x7FF };
         if aid > limit {
@@ -666,33 +701,8 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
             notes.warn(F::FOREIGN, "remote frame".to_string());
             summary = format!("remote {kind} {ident} [{length}]");
         } else {
-            if frame.is_fd {
-                fields.push((Cow::Borrowed("fd"), Value::Bool(true)));
-                kind = Cow::Owned(format!("FD {kind}"));
-            } else if data.len() > 8 {
-                notes.warn(
-                    F::MALFORMED,
-                    format!("{} data bytes in a classic CAN frame", data.len()),
-                );
-            } else if frame.dlc.is_some_and(|d| d != data.len()) {
-                notes.warn(
-                    F::MALFORMED,
-                    format!(
-                        "DLC {} with {} data bytes",
-                        frame.dlc.unwrap_or(0),
-                        data.len()
-                    ),
-                );
-            } else if extended && filtered && aid < RESERVED_BIT {
-                // left out by the decoder's device filter
-                fields.push((
-                    Cow::Borrowed("eg2_device"),
-                    Value::Int((aid & 0x3FFF) as i64),
-                ));
-            }
-            let mut s = format!("{kind} {ident} [{}] ", data.len());
-            push_hex(&mut s, data);
-            summary = rstrip(s);
+            let title = format!("{kind} {ident}");
+            summary = data_frame(frame, title, filtered, &mut fields, &mut notes);
         }
         fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
     }
@@ -711,6 +721,57 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
         is_save: false,
         flags: notes.flags,
     }
+}
+
+/// Summary of a CAN error frame (aid: its error class); its problem is noted (`_error_frame`).
+fn error_frame(aid: u32, data: &[u8], fields: &mut Fields, notes: &mut Notes) -> String {
+    let text = can_error_text(aid);
+    notes.error(F::CAN_ERROR_FRAME, text.clone());
+    fields.push((Cow::Borrowed("error_class"), Value::Int(aid as i64)));
+    fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
+    let mut s = format!("{text} [{}] ", data.len());
+    push_hex(&mut s, data);
+    rstrip(s)
+}
+
+/// Summary of a foreign data frame (title: its kind and identifier); what does not fit
+/// classic CAN is noted (`_data_frame`).
+fn data_frame(
+    frame: &CanFrame,
+    mut title: String,
+    filtered: bool,
+    fields: &mut Fields,
+    notes: &mut Notes,
+) -> String {
+    let aid = frame.arbitration_id;
+    let data = &frame.data[..];
+    if frame.is_fd {
+        fields.push((Cow::Borrowed("fd"), Value::Bool(true)));
+        title.insert_str(0, "FD ");
+    } else if data.len() > 8 {
+        notes.warn(
+            F::MALFORMED,
+            format!("{} data bytes in a classic CAN frame", data.len()),
+        );
+    } else if frame.dlc.is_some_and(|d| d != data.len()) {
+        notes.warn(
+            F::MALFORMED,
+            format!(
+                "DLC {} with {} data bytes",
+                frame.dlc.unwrap_or(0),
+                data.len()
+            ),
+        );
+    } else if frame.is_extended && filtered && aid < RESERVED_BIT {
+        // left out by the decoder's device filter
+        fields.push((
+            Cow::Borrowed("eg2_device"),
+            Value::Int((aid & 0x3FFF) as i64),
+        ));
+    }
+    let mut s = format!("{title} [{}] ", data.len());
+    push_hex(&mut s, data);
+    rstrip(s)
 }
 
 /// The last read response or write request per identifier, length and direction: its data,
@@ -734,7 +795,7 @@ pub struct Eg2CanDecoder {
 }
 
 /// The memoised decodes. A decode does not depend on the bus, so the decoders of all the buses
-/// of a capture can share one set (pipeline.rs does): memory stays bounded however many
+/// of a capture can share one set (offline_run.rs does): memory stays bounded however many
 /// channels a log names. Caches: what they drop changes no output.
 #[derive(Default)]
 pub struct CanMemos {
@@ -899,65 +960,24 @@ fn fill(values_cache: &mut FastMap<u64, ValueEntry>, layout: &Layout, data: &[u8
         flags: layout.flags.clone(),
     };
     if count_shaped(data) {
-        let text = if layout.read {
-            format!(
-                "could also be a repeated read request of {} (taken as the response to the \
-                 pending request)",
-                plural(data[0] as usize)
-            )
-        } else {
-            format!(
-                "could also be the response to a write of {} whose request was not seen",
-                plural(data[0] as usize)
-            )
-        };
-        notes.warn(F::AMBIGUOUS_DIRECTION, text);
+        note_ambiguity(layout, data[0] as usize, &mut notes);
     }
-    let mut values: Fields = Vec::with_capacity(layout.slots.len());
-    let mut summary = String::with_capacity(layout.prefix.len() + 24 * layout.slots.len());
-    summary.push_str(&layout.prefix);
-    let mut first = true;
-    let mut sep = |s: &mut String| {
-        if !std::mem::take(&mut first) {
-            s.push_str(", ");
-        }
-    };
+    let mut summary = Parts::new(&layout.prefix, 24 * layout.slots.len());
     let mut partial: Vec<Value> = Vec::new();
-    let mut is_save = false;
     if let Some((address, name)) = &layout.head {
-        partial.push(partial_entry(*address, data[0], name, "high"));
-        sep(&mut summary);
-        let _ = write!(summary, "byte {address}=0x{:02X}", data[0]);
+        half_byte(*address, data[0], name, "high", &mut summary, &mut partial);
     }
-    if values_cache.len() >= VALUE_CACHE_LIMIT {
-        values_cache.clear();
-    }
-    for (k, (name, address, reg)) in layout.slots.iter().enumerate() {
-        let i = layout.start + 2 * k;
-        let raw = u16::from_le_bytes([data[i], data[i + 1]]);
-        let entry = values_cache
-            .entry((*address as u64) << 16 | raw as u64)
-            .or_insert_with(|| value_entry(reg, raw));
-        values.push((name.clone(), Value::Int(entry.value)));
-        sep(&mut summary);
-        summary.push_str(&entry.text);
-        if let Some(problem) = &entry.problem {
-            notes.warn(F::OUT_OF_RANGE, problem.clone());
-        }
-        if let Some((key, value)) = &entry.extra {
-            // a dict assignment: a key already there keeps its place
-            match fields.iter_mut().find(|(k, _)| k == key) {
-                Some(slot) => slot.1 = value.clone(),
-                None => fields.push((Cow::Borrowed(key), value.clone())),
-            }
-        }
-        is_save |= entry.save;
-    }
+    let (values, is_save) = fill_values(
+        values_cache,
+        layout,
+        data,
+        &mut fields,
+        &mut summary,
+        &mut notes,
+    );
     if let Some((address, name)) = &layout.tail {
         let last = data[data.len() - 1];
-        partial.push(partial_entry(*address, last, name, "low"));
-        sep(&mut summary);
-        let _ = write!(summary, "byte {address}=0x{last:02X}");
+        half_byte(*address, last, name, "low", &mut summary, &mut partial);
     }
     fields.push((Cow::Borrowed("values"), Value::Map(values)));
     if !partial.is_empty() {
@@ -972,12 +992,104 @@ fn fill(values_cache: &mut FastMap<u64, ValueEntry>, layout: &Layout, data: &[u8
         fields: fields.into(),
         errors: Vec::new(),
         warnings: notes.warnings,
-        summary: summary.into(),
+        summary: summary.text.into(),
         pair_key: Some(layout.pair_key),
         expects: layout.expects,
         is_save,
         flags: notes.flags,
     }
+}
+
+/// A summary being built: a prefix, then parts joined by ", " (Python's `", ".join(parts)`).
+struct Parts {
+    text: String,
+    empty: bool,
+}
+
+impl Parts {
+    fn new(prefix: &str, room: usize) -> Self {
+        let mut text = String::with_capacity(prefix.len() + room);
+        text.push_str(prefix);
+        Parts { text, empty: true }
+    }
+
+    /// The text, ready for the next part.
+    fn next(&mut self) -> &mut String {
+        if !std::mem::take(&mut self.empty) {
+            self.text.push_str(", ");
+        }
+        &mut self.text
+    }
+}
+
+/// A value-carrying frame shaped like a count could also be the other direction
+/// (`_note_ambiguity`).
+fn note_ambiguity(layout: &Layout, count: usize, notes: &mut Notes) {
+    let text = if layout.read {
+        format!(
+            "could also be a repeated read request of {} (taken as the response to the \
+             pending request)",
+            plural(count)
+        )
+    } else {
+        format!(
+            "could also be the response to a write of {} whose request was not seen",
+            plural(count)
+        )
+    };
+    notes.warn(F::AMBIGUOUS_DIRECTION, text);
+}
+
+/// One byte of a register whose other half lies outside the frame (`_half_byte`).
+fn half_byte(
+    address: i64,
+    byte: u8,
+    register: &Str,
+    half: &'static str,
+    summary: &mut Parts,
+    partial: &mut Vec<Value>,
+) {
+    partial.push(partial_entry(address, byte, register, half));
+    let _ = write!(summary.next(), "byte {address}=0x{byte:02X}");
+}
+
+/// The register values of the frame (and whether one is a parameter save); their texts go to
+/// the summary, their extra fields to fields (`_fill_values`). `values_cache` memoises the
+/// decoded value per (CAN address, raw value).
+fn fill_values(
+    values_cache: &mut FastMap<u64, ValueEntry>,
+    layout: &Layout,
+    data: &[u8],
+    fields: &mut Fields,
+    summary: &mut Parts,
+    notes: &mut Notes,
+) -> (Fields, bool) {
+    let mut values: Fields = Vec::with_capacity(layout.slots.len());
+    let mut is_save = false;
+    if values_cache.len() >= VALUE_CACHE_LIMIT {
+        values_cache.clear();
+    }
+    for (k, (name, address, reg)) in layout.slots.iter().enumerate() {
+        let i = layout.start + 2 * k;
+        let raw = u16::from_le_bytes([data[i], data[i + 1]]);
+        let entry = values_cache
+            .entry((*address as u64) << 16 | raw as u64)
+            .or_insert_with(|| value_entry(reg, raw));
+        values.push((name.clone(), Value::Int(entry.value)));
+        summary.next().push_str(&entry.text);
+        if let Some(problem) = &entry.problem {
+            notes.warn(F::OUT_OF_RANGE, problem.clone());
+        }
+        if let Some((key, value)) = &entry.extra {
+            // a dict assignment: a key already there keeps its place
+            match fields.iter_mut().find(|(k, _)| k == key) {
+                Some(slot) => slot.1 = value.clone(),
+                None => fields.push((Cow::Borrowed(key), value.clone())),
+            }
+        }
+        is_save |= entry.save;
+    }
+    (values, is_save)
 }
 
 fn partial_entry(address: i64, byte: u8, register: &Str, half: &'static str) -> Value {

@@ -10,10 +10,10 @@
 //! A child module of python.rs: it shares its errors, options and GIL helpers.
 
 use super::{os_error, protocol_by_name, Unsupported};
-use crate::arrow::{ArrowTables, ArrowWriter, Buffers, ColumnSpec, RecordColumns, Type};
-use crate::arrow_states::StateColumns;
-use crate::pipeline::{DecodeOptions, DecodeRun};
-use crate::writers::{Format, TextOptions};
+use crate::parquet::records::{ArrowTables, ArrowWriter, Buffers, ColumnSpec, RecordColumns, Type};
+use crate::parquet::states::StateColumns;
+use crate::session::offline_run::{DecodeOptions, DecodeRun};
+use crate::sinks::writers::{Format, TextOptions};
 use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};

@@ -18,10 +18,10 @@
 //! most rows, and a column with no value in a batch is handed out as "all null", with no
 //! buffer at all.
 
-use crate::arrow_states::{Row, StateColumns};
+use crate::decoders::model::{Record, Value};
 use crate::json::{push_map, push_str, push_value};
-use crate::model::{Record, Value};
-use crate::tracker::Tracker;
+use crate::parquet::states::{Row, StateColumns};
+use crate::session::tracker::Tracker;
 use std::sync::{Arc, Mutex};
 
 // -- the schema as Python describes it --------------------------------------------------------
@@ -761,7 +761,7 @@ impl RecordColumns {
 fn split_fields(
     col: &mut Column,
     row: usize,
-    fields: &[(crate::model::Str, Value)],
+    fields: &[(crate::decoders::model::Str, Value)],
     values_key: &str,
     json: &mut String,
 ) {
@@ -877,7 +877,7 @@ impl ArrowTables {
 /// instead of bytes: the Python binding takes the columns out between batches.
 pub struct ArrowWriter(pub Arc<Mutex<ArrowTables>>);
 
-impl crate::writers::RecordWriter for ArrowWriter {
+impl crate::sinks::writers::RecordWriter for ArrowWriter {
     fn write(&mut self, rec: &Record, _out: &mut Vec<u8>) {
         self.0.lock().unwrap_or_else(|e| e.into_inner()).push(rec);
     }
@@ -886,7 +886,7 @@ impl crate::writers::RecordWriter for ArrowWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Record, EG2_CAN, MODBUS_RTU};
+    use crate::decoders::model::{Record, EG2_CAN, MODBUS_RTU};
     use std::borrow::Cow;
 
     /// A small parse schema: two record columns, one family with a register map, other_fields.

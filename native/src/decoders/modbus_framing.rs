@@ -6,10 +6,10 @@
 //! lengths, the CRC-16/MODBUS confirms one. Candidates within `CLOSE` bytes of each other can
 //! collide structurally; `_decide`/`_settle` pick one exactly as the Python does.
 
-use crate::model::RESPONSE;
+use crate::decoders::model::RESPONSE;
 
-use crate::framing::Stream;
-pub use crate::framing::NEED_MORE;
+use crate::decoders::framing::Stream;
+pub use crate::decoders::framing::NEED_MORE;
 
 // function codes, as sent in requests (an exception response sets bit 7)
 pub const READ_COILS: u8 = 0x01;
@@ -275,6 +275,72 @@ pub struct ModbusFramer {
 /// Up to two candidate lengths and their CRC states (None: not complete / unknown length).
 type Cands = ([i64; 2], usize);
 
+/// Does the close reading of length second hold its CRC too, beside the one ending at end?
+/// None when that needs more bytes (`_close_reading_holds`).
+#[inline]
+fn close_reading_holds(
+    buf: &[u8],
+    pos: usize,
+    n: usize,
+    fin: bool,
+    end: usize,
+    second: i64,
+    exact: bool,
+) -> Option<bool> {
+    let d = pos as i64 + second - end as i64;
+    if d > 0 && exact {
+        // exact shortcut: this frame's CRC residue is 0, so a reading d bytes longer holds
+        // exactly when the d bytes after it are 00
+        if end + d as usize > n {
+            return if fin { Some(false) } else { None };
+        }
+        return Some(buf[end] == 0 && (d == 1 || buf[end + 1] == 0));
+    }
+    if pos + second as usize > n {
+        return if fin { Some(false) } else { None };
+    }
+    Some(crc_state(buf, pos, pos + second as usize) != CRC_BAD)
+}
+
+/// Index of the first reading whose CRC holds, Some(None) if none does; None while a reading
+/// preferred to it is not complete yet (`_first_holding`).
+fn first_holding(states: &[Option<u8>], fin: bool) -> Option<Option<usize>> {
+    for (i, state) in states.iter().enumerate() {
+        match state {
+            None if !fin => return None,
+            Some(s) if *s != CRC_BAD => return Some(Some(i)),
+            _ => {}
+        }
+    }
+    Some(None)
+}
+
+/// The holding reading cands[best] and the later readings close enough to rival it that hold
+/// too; None while such a rival is not complete yet (`_contenders`).
+fn contenders(
+    cands: &[i64],
+    states: &[Option<u8>],
+    best: usize,
+    rivals: bool,
+    fin: bool,
+) -> Option<Cands> {
+    let length = cands[best];
+    let mut contenders: Cands = ([length, 0], 1);
+    for (&c, state) in cands[best + 1..].iter().zip(&states[best + 1..]) {
+        if rivals && (c < 0 || (c - length).abs() <= CLOSE) {
+            match state {
+                None if !fin => return None,
+                Some(s) if *s != CRC_BAD => {
+                    contenders.0[contenders.1] = c;
+                    contenders.1 += 1;
+                }
+                _ => {}
+            }
+        }
+    }
+    Some(contenders)
+}
+
 impl ModbusFramer {
     /// Length of a valid frame at pos (> 0); -length of a frame-shaped candidate whose CRC
     /// fails; 0 if no frame starts here; NEED_MORE if more bytes are needed.
@@ -292,36 +358,69 @@ impl ModbusFramer {
         if pos + 1 >= n {
             return NEED_MORE;
         }
-        let fc = buf[pos + 1];
-        let kind = KIND[fc as usize];
+        let kind = KIND[buf[pos + 1] as usize];
         if kind == KIND_SINGLE || kind == KIND_EXCEPTION {
             // one shape, either direction
-            let first: usize = if kind == KIND_SINGLE { 8 } else { 5 };
-            let end = pos + first;
-            if end <= n {
-                let c = crc16(&buf[pos..end - 2]);
-                let got = buf[end - 2] as u16 | (buf[end - 1] as u16) << 8;
-                if got == c {
-                    return first as i64;
-                }
-                if got == c.swap_bytes() {
-                    self.swapped = Some((ctx.base() + pos as u64, first));
-                    return first as i64;
-                }
-            }
-            return self.decide(ctx, buf, pos, n, fin, ([first as i64, 0], 1), false);
+            let length = if kind == KIND_SINGLE { 8 } else { 5 };
+            return self.one_shape_at(ctx, buf, pos, n, fin, length);
         }
         if kind == 0 {
             return 0;
         }
         let hint = ctx.direction_hint();
+        let (first, second) = self.two_readings(buf, pos, n, kind, hint);
+        if let Some(length) = self.expected_reading(ctx, buf, pos, n, fin, first, second, hint) {
+            return length;
+        }
+        let cands = if second == 0 {
+            ([first, 0], 1)
+        } else {
+            ([first, second], 2)
+        };
+        self.decide(ctx, buf, pos, n, fin, cands, hint.is_none())
+    }
+
+    /// frame_at for a function with one frame length in either direction (`_one_shape_at`).
+    fn one_shape_at<C: FrameContext + ?Sized>(
+        &mut self,
+        ctx: &C,
+        buf: &[u8],
+        pos: usize,
+        n: usize,
+        fin: bool,
+        length: usize,
+    ) -> i64 {
+        let end = pos + length;
+        if end <= n {
+            let c = crc16(&buf[pos..end - 2]);
+            let got = buf[end - 2] as u16 | (buf[end - 1] as u16) << 8;
+            if got == c {
+                return length as i64;
+            }
+            if got == c.swap_bytes() {
+                self.swapped = Some((ctx.base() + pos as u64, length));
+                return length as i64;
+            }
+        }
+        self.decide(ctx, buf, pos, n, fin, ([length as i64, 0], 1), false)
+    }
+
+    /// The two candidate lengths, preferred first, as candidates() orders them (inlined as
+    /// the Python does); second == 0: none, -1: its length is not known yet (`_two_readings`).
+    #[inline]
+    fn two_readings(
+        &self,
+        buf: &[u8],
+        pos: usize,
+        n: usize,
+        kind: u8,
+        hint: Option<&'static str>,
+    ) -> (i64, i64) {
         let resp_first = match hint {
             None => matches!(self.pending, Some(p) if p.slave == buf[pos]),
             Some(h) => h == RESPONSE,
         };
-        // the two candidates, preferred first, as candidates() orders them (inlined as the
-        // Python does); second == 0: none, -1: its length is not known yet
-        let (first, second): (i64, i64);
+        let fc = buf[pos + 1];
         if kind == KIND_READ {
             let other = if pos + 2 < n {
                 let bc = buf[pos + 2];
@@ -333,71 +432,70 @@ impl ModbusFramer {
             } else {
                 -1
             };
-            if resp_first && other != 0 {
-                (first, second) = (other, 8);
+            return if resp_first && other != 0 {
+                (other, 8)
             } else {
-                (first, second) = (8, other);
-            }
-        } else {
-            let other = if pos + 6 < n {
-                write_request_len(fc, word(buf, pos + 4), buf[pos + 6])
-            } else {
-                -1
+                (8, other)
             };
-            if resp_first || other == 0 {
-                (first, second) = (8, other);
-            } else {
-                (first, second) = (other, 8);
-            }
         }
-        // the common case: the expected shape checks, and no other reading is close enough
-        // to it to collide (see decide) or that reading fails its CRC; a known direction
-        // settles the reading by itself
-        let end = pos as i64 + first;
-        if first > 0 && end as usize <= n {
-            let end = end as usize;
-            let c = crc16(&buf[pos..end - 2]);
-            let got = buf[end - 2] as u16 | (buf[end - 1] as u16) << 8;
-            if got == c || got == c.swap_bytes() {
-                let d = second - first;
-                if second > 0 && hint.is_none() && (-CLOSE..=CLOSE).contains(&d) {
-                    // a close reading: does it hold too? (then decide settles it)
-                    if d > 0 && got == c {
-                        // exact shortcut: this frame's CRC residue is 0, so a reading d bytes
-                        // longer holds exactly when the d bytes after it are 00
-                        if end + d as usize > n {
-                            if !fin {
-                                return NEED_MORE;
-                            }
-                        } else if buf[end] == 0 && (d == 1 || buf[end + 1] == 0) {
-                            return self.decide(ctx, buf, pos, n, fin, ([first, second], 2), true);
-                        }
-                    } else if pos + second as usize > n {
-                        if !fin {
-                            return NEED_MORE;
-                        }
-                    } else if crc_state(buf, pos, pos + second as usize) != CRC_BAD {
-                        return self.decide(ctx, buf, pos, n, fin, ([first, second], 2), true);
-                    }
-                }
-                if got != c {
-                    self.swapped = Some((ctx.base() + pos as u64, first as usize));
-                }
-                return first;
-            }
-        }
-        let cands = if second == 0 {
-            ([first, 0], 1)
+        let other = if pos + 6 < n {
+            write_request_len(fc, word(buf, pos + 4), buf[pos + 6])
         } else {
-            ([first, second], 2)
+            -1
         };
-        self.decide(ctx, buf, pos, n, fin, cands, hint.is_none())
+        if resp_first || other == 0 {
+            (8, other)
+        } else {
+            (other, 8)
+        }
+    }
+
+    /// The common case: the expected shape checks, and no other reading is close enough to it
+    /// to collide (see decide) or that reading fails its CRC; a known direction settles the
+    /// reading by itself. None when this does not settle it (`_expected_reading`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn expected_reading<C: FrameContext + ?Sized>(
+        &mut self,
+        ctx: &C,
+        buf: &[u8],
+        pos: usize,
+        n: usize,
+        fin: bool,
+        first: i64,
+        second: i64,
+        hint: Option<&'static str>,
+    ) -> Option<i64> {
+        let end = pos as i64 + first;
+        if first <= 0 || end as usize > n {
+            return None;
+        }
+        let end = end as usize;
+        let c = crc16(&buf[pos..end - 2]);
+        let got = buf[end - 2] as u16 | (buf[end - 1] as u16) << 8;
+        if got != c && got != c.swap_bytes() {
+            return None;
+        }
+        let d = second - first;
+        if second > 0 && hint.is_none() && (-CLOSE..=CLOSE).contains(&d) {
+            match close_reading_holds(buf, pos, n, fin, end, second, got == c) {
+                None => return Some(NEED_MORE),
+                // then decide settles it
+                Some(true) => {
+                    return Some(self.decide(ctx, buf, pos, n, fin, ([first, second], 2), true))
+                }
+                Some(false) => {}
+            }
+        }
+        if got != c {
+            self.swapped = Some((ctx.base() + pos as u64, first as usize));
+        }
+        Some(first)
     }
 
     /// frame_at beyond the common case: every candidate, in the order the bus expects
     /// (`_decide`). The reading is the first candidate whose CRC holds; a close reading that
-    /// holds too is settled by `settle`. Failing all, a bad CRC makes a frame only where one
-    /// plausibly ends.
+    /// holds too is settled by `settle`. Failing all, `damaged_reading`.
     #[allow(clippy::too_many_arguments)]
     fn decide<C: FrameContext + ?Sized>(
         &mut self,
@@ -420,59 +518,53 @@ impl ModbusFramer {
             };
         }
         let states = &states[..cn];
-        let mut best = None;
-        for (i, state) in states.iter().enumerate() {
-            match state {
-                // a preferred reading is not complete yet
-                None if !fin => return NEED_MORE,
-                Some(s) if *s != CRC_BAD => {
-                    best = Some(i);
-                    break;
-                }
-                _ => {}
+        let best = match first_holding(states, fin) {
+            None => return NEED_MORE,
+            Some(None) => return self.damaged_reading(ctx, buf, pos, n, fin, cands, states),
+            Some(Some(best)) => best,
+        };
+        let Some(contenders) = contenders(cands, states, best, rivals, fin) else {
+            return NEED_MORE;
+        };
+        let mut length = contenders.0[0];
+        if contenders.1 > 1 {
+            length = self.settle(
+                ctx,
+                buf,
+                pos,
+                n,
+                fin,
+                &contenders.0[..contenders.1],
+                cands[0],
+            );
+            if length == NEED_MORE {
+                return NEED_MORE;
             }
         }
-        if let Some(best) = best {
-            let mut length = cands[best];
-            let mut contenders: ([i64; 2], usize) = ([length, 0], 1);
-            for (&c, state) in cands[best + 1..].iter().zip(&states[best + 1..]) {
-                if rivals && (c < 0 || (c - length).abs() <= CLOSE) {
-                    match state {
-                        None if !fin => return NEED_MORE,
-                        Some(s) if *s != CRC_BAD => {
-                            contenders.0[contenders.1] = c;
-                            contenders.1 += 1;
-                        }
-                        _ => {}
-                    }
-                }
-            }
-            if contenders.1 > 1 {
-                length = self.settle(
-                    ctx,
-                    buf,
-                    pos,
-                    n,
-                    fin,
-                    &contenders.0[..contenders.1],
-                    cands[0],
-                );
-                if length == NEED_MORE {
-                    return NEED_MORE;
-                }
-            }
-            let idx = cands
-                .iter()
-                .position(|&c| c == length)
-                .expect("length is a candidate");
-            if states[idx] == Some(CRC_SWAPPED_ORDER) {
-                self.swapped = Some((ctx.base() + pos as u64, length as usize));
-            }
-            return length;
+        let idx = cands
+            .iter()
+            .position(|&c| c == length)
+            .expect("length is a candidate");
+        if states[idx] == Some(CRC_SWAPPED_ORDER) {
+            self.swapped = Some((ctx.base() + pos as u64, length as usize));
         }
-        // every candidate failed its CRC, or the stream ended: the first candidate cut off by
-        // the end makes a truncated frame (the base reports it on NEED_MORE when final); a bad
-        // CRC makes a frame only where one plausibly ends
+        length
+    }
+
+    /// Every candidate failed its CRC, or the stream ended: the first candidate cut off by the
+    /// end makes a truncated frame (the base reports it on NEED_MORE when final); a bad CRC
+    /// makes a frame only where one plausibly ends (`_damaged_reading`).
+    #[allow(clippy::too_many_arguments)]
+    fn damaged_reading<C: FrameContext + ?Sized>(
+        &self,
+        ctx: &C,
+        buf: &[u8],
+        pos: usize,
+        n: usize,
+        fin: bool,
+        cands: &[i64],
+        states: &[Option<u8>],
+    ) -> i64 {
         for (&c, state) in cands.iter().zip(states) {
             if state.is_none() {
                 return NEED_MORE;

@@ -6,17 +6,17 @@
 //! their answer): memory stays flat at any input size. The output is pulled in batches of
 //! bytes (`next_batch`), which the Python binding hands on without looking inside.
 
-use crate::can::{CanMemos, Eg2CanDecoder};
-use crate::candump::{BusNamer, CandumpReader};
-use crate::detect::detect_protocol;
-use crate::framing::StreamDecoder;
-use crate::lint::TimingLinter;
-use crate::modbus::ModbusRtuDecoder;
-use crate::model::{CanFrame, Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
-use crate::pairing::Pairer;
-use crate::rawfile::{check_readable, BytesReader};
-use crate::serial::Eg2SerialDecoder;
-use crate::writers::{make_writer, Format, RecordWriter, TextOptions};
+use crate::decoders::eg2_can::{CanMemos, Eg2CanDecoder};
+use crate::decoders::eg2_serial::Eg2SerialDecoder;
+use crate::decoders::framing::StreamDecoder;
+use crate::decoders::lint::TimingLinter;
+use crate::decoders::modbus_rtu::ModbusRtuDecoder;
+use crate::decoders::model::{CanFrame, Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
+use crate::decoders::pairing::Pairer;
+use crate::decoders::registry::detect_protocol;
+use crate::sinks::writers::{make_writer, Format, RecordWriter, TextOptions};
+use crate::sources::candump::{BusNamer, CandumpReader};
+use crate::sources::capture::{check_readable, BytesReader};
 use std::io;
 use std::path::Path;
 use std::sync::Arc;
@@ -81,7 +81,7 @@ fn suffixes(path: &Path) -> Vec<String> {
 /// `Unsupported` error for what only Python reads (PCAN traces, python-can's formats, MCAP)
 /// or refuses (`.mcap.gz`, `.mf4.gz`: a usage error there).
 pub fn reader_for(path: &Path) -> io::Result<ReaderKind> {
-    match crate::sniff::sniff(path) {
+    match crate::sources::sniff::sniff(path) {
         Some("candump") => return Ok(ReaderKind::Candump),
         Some(other) => {
             return Err(io::Error::new(
@@ -387,7 +387,7 @@ impl DecodeRun {
         Self::open_with_writer(path, opts, writer)
     }
 
-    /// `open` with a writer of the caller's instead of `opts.format`'s (arrow.rs: columns for
+    /// `open` with a writer of the caller's instead of `opts.format`'s (parquet/records.rs: columns for
     /// the Parquet output).
     pub fn open_with_writer(
         path: &Path,
@@ -481,7 +481,7 @@ impl DecodeRun {
         true
     }
 
-    /// `next_batch` for a writer that writes no bytes (arrow.rs): decode until at least
+    /// `next_batch` for a writer that writes no bytes (parquet/records.rs): decode until at least
     /// `max_records` more records were written (unless the input ends). False once everything
     /// has been written.
     pub fn next_records(&mut self, out: &mut Vec<u8>, max_records: u64) -> bool {

@@ -19,10 +19,10 @@
 //! A child module of python.rs (helper K's tracker, a sibling, reads `RecordBatch::records`).
 
 use super::python_frames::FrameBatch;
+use crate::decoders::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
 use crate::hash::FastMap;
-use crate::live::LiveCan as Core;
-use crate::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
-use crate::writers::{JsonlWriter, RecordWriter};
+use crate::session::can_stage::LiveCan as Core;
+use crate::sinks::writers::{JsonlWriter, RecordWriter};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError};
 use pyo3::intern;
 use pyo3::prelude::*;

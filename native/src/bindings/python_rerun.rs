@@ -5,9 +5,9 @@
 //! here makes no Python Record per record, only the columns the plot sends.
 
 use super::python_live::RecordBatch;
-use crate::flags::{DEVICE_FAULT, UNANSWERED};
+use crate::decoders::flags::{DEVICE_FAULT, UNANSWERED};
+use crate::decoders::model::{Record, FRAME, REQUEST};
 use crate::hash::FastMap;
-use crate::model::{Record, FRAME, REQUEST};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 use std::sync::Arc;

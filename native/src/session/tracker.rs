@@ -13,13 +13,13 @@
 
 use std::sync::{Arc, OnceLock};
 
-use crate::flags::{OUT_OF_RANGE, UNANSWERED};
+use crate::decoders::eg2_serial::cmd;
+use crate::decoders::flags::{OUT_OF_RANGE, UNANSWERED};
+use crate::decoders::model::{Fields, Record, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE};
+use crate::decoders::registers::{by_name, fault_text, opening_mm, state_text, STROKE_MM};
 use crate::hash::FastMap;
 use crate::json::{push_int, push_str, push_value};
-use crate::model::{Fields, Record, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE};
 use crate::pyfloat::{push_json_float, push_py_repr, py_round};
-use crate::registers::{by_name, fault_text, opening_mm, state_text, STROKE_MM};
-use crate::serial::cmd;
 
 /// The state fields, in the order they are shown and recorded (READINGS, SETTINGS,
 /// last_command, latency_ms, COUNTERS).
@@ -389,7 +389,7 @@ impl Tracker {
 
 /// `fields.get(key)` (the decoders keep a field's keys unique, as a dict's).
 #[inline]
-fn get<'a>(fields: &'a [(crate::model::Str, Value)], key: &str) -> Option<&'a Value> {
+fn get<'a>(fields: &'a [(crate::decoders::model::Str, Value)], key: &str) -> Option<&'a Value> {
     fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
 }
 
@@ -443,7 +443,7 @@ fn spec(name: &str) -> Option<&'static Spec> {
 /// ignores such a write).
 fn registers(f: &Fields, request: bool, fold: &mut Fold<'_>) {
     let one;
-    let values: &[(crate::model::Str, Value)] = match get(f, "values") {
+    let values: &[(crate::decoders::model::Str, Value)] = match get(f, "values") {
         Some(Value::Map(values)) => values,
         _ => {
             // a single write (Modbus 0x06): {name: value}
@@ -457,7 +457,7 @@ fn registers(f: &Fields, request: bool, fold: &mut Fold<'_>) {
             &one
         }
     };
-    let out_of_range = |(name, value): &(crate::model::Str, Value)| {
+    let out_of_range = |(name, value): &(crate::decoders::model::Str, Value)| {
         let Some(spec) = spec(name) else {
             return false;
         };
@@ -675,7 +675,7 @@ pub fn push_sample_json(out: &mut String, s: &Sample) -> Result<(), NotAnInt> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Str, EG2_CAN, MODBUS_RTU};
+    use crate::decoders::model::{Str, EG2_CAN, MODBUS_RTU};
     use std::borrow::Cow;
 
     fn rec(protocol: &'static str, direction: &'static str, fields: Fields) -> Record {
@@ -779,7 +779,7 @@ mod tests {
             (Cow::Borrowed("value"), Value::Int(300)),
         ];
         let mut r = rec(MODBUS_RTU, REQUEST, fields.clone());
-        r.summary = crate::model::empty_text();
+        r.summary = crate::decoders::model::empty_text();
         r.name = Some(Cow::Borrowed("CMD_SPEED_SET"));
         let s = t.update(&r).unwrap();
         assert_eq!(s.values.slots[SPEED], Slot::Int(300));
@@ -854,7 +854,7 @@ mod tests {
         assert!(t.update(&r).is_none());
         assert_eq!(t.states()[0].values.slots[TEMPERATURE_C], Slot::Int(40));
         let mut g = r.clone();
-        g.kind = crate::model::GARBAGE;
+        g.kind = crate::decoders::model::GARBAGE;
         let mut n = r.clone();
         n.device = None;
         assert!(t.update(&g).is_none() && t.update(&n).is_none());

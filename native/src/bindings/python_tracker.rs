@@ -17,14 +17,14 @@
 use super::python_arrow::{column_specs, parts_to_py, state_parts};
 use super::python_live::RecordBatch;
 use super::Unsupported;
-use crate::arrow_states::StateColumns;
-use crate::flags::{OUT_OF_RANGE, UNANSWERED};
-use crate::hash::FastMap;
-use crate::model::{
+use crate::decoders::flags::{OUT_OF_RANGE, UNANSWERED};
+use crate::decoders::model::{
     Fields, Record, Str, Value, CUT_OFF, EG2_CAN, EG2_SERIAL, FOREIGN_CAN, FRAME, GARBAGE,
     MODBUS_RTU, REQUEST, RESPONSE, TRUNCATED,
 };
-use crate::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
+use crate::hash::FastMap;
+use crate::parquet::states::StateColumns;
+use crate::session::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError, PyValueError};
 use pyo3::intern;
 use pyo3::prelude::*;

@@ -5,10 +5,10 @@
 //! the one that finds the most valid frames: the two decoders are the reference for what a
 //! frame is, so no second, cheaper opinion could agree with them on every input.
 
-use crate::framing::StreamDecoder;
-use crate::modbus::ModbusRtuDecoder;
-use crate::model::{Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
-use crate::serial::Eg2SerialDecoder;
+use crate::decoders::eg2_serial::Eg2SerialDecoder;
+use crate::decoders::framing::StreamDecoder;
+use crate::decoders::modbus_rtu::ModbusRtuDecoder;
+use crate::decoders::model::{Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
 use std::sync::Arc;
 
 /// registry.py `ALIASES`: a protocol name or alias (lower case) to its canonical name.

@@ -8,21 +8,15 @@
 //! a read response's registers), how many identical copies of it a retrying host sent, and the
 //! devices already said to use short register numbers.
 
-#[path = "modbus_framing.rs"]
-pub mod modbus_framing;
-#[path = "modbus_pdu.rs"]
-pub mod modbus_pdu;
-#[path = "modbus_registers.rs"]
-pub mod modbus_registers;
-
 use std::sync::Arc;
 
-use crate::flags::SHORT_REGISTER_NUMBERS;
-use crate::framing::{ByteStreamDecoder, Framing, Stream};
-use crate::hash::FrameMemo;
-use crate::model::{
+use super::{modbus_framing, modbus_pdu, modbus_registers};
+use crate::decoders::flags::SHORT_REGISTER_NUMBERS;
+use crate::decoders::framing::{ByteStreamDecoder, Framing, Stream};
+use crate::decoders::model::{
     PairKey, Record, SharedFields, Str, Text, FRAME, MODBUS_RTU, REQUEST, RESPONSE,
 };
+use crate::hash::FrameMemo;
 use modbus_framing::{ModbusFramer, Pending, CRC_OK, CRC_SWAPPED_ORDER};
 use modbus_pdu::decode;
 use modbus_registers::Memo;
@@ -268,8 +262,8 @@ impl Framing for ModbusRtu {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::framing::StreamDecoder;
-    use crate::model::{Value, GARBAGE, REQUEST, TRUNCATED};
+    use crate::decoders::framing::StreamDecoder;
+    use crate::decoders::model::{Value, GARBAGE, REQUEST, TRUNCATED};
     use modbus_framing::crc16;
 
     fn with_crc(pdu: &[u8]) -> Vec<u8> {
@@ -381,7 +375,7 @@ mod tests {
             recs[1].warnings,
             vec!["CRC byte order swapped (high byte first)"]
         );
-        assert_eq!(recs[1].flags, vec![crate::flags::SWAPPED_CRC]);
+        assert_eq!(recs[1].flags, vec![crate::decoders::flags::SWAPPED_CRC]);
         assert!(recs[1].errors.is_empty());
         assert_eq!(recs[2].kind, TRUNCATED);
         assert_eq!(

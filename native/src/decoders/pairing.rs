@@ -11,8 +11,8 @@
 //! Here every record that enters the hold gets a ticket (consecutive numbers), so a pending
 //! request is found in the hold by arithmetic, and "waiting" is a flag beside the record.
 
-use crate::flags::{CUT_OFF, ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED};
-use crate::model::{PairKey, Record, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE};
+use crate::decoders::flags::{CUT_OFF, ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED};
+use crate::decoders::model::{PairKey, Record, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE};
 use crate::pyfloat::{py_fixed, py_round};
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -548,7 +548,7 @@ impl Pairer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{EG2_CAN, GARBAGE};
+    use crate::decoders::model::{EG2_CAN, GARBAGE};
 
     fn rec(
         t: Option<f64>,

@@ -6,8 +6,8 @@
 //! A `FrameBatch` is opaque to Python (only its length): a session reads a capture this way
 //! only when no listener wants the raw items and its decoding is the native `LiveCan`.
 
-use crate::candump::{BusNamer, CandumpReader};
-use crate::model::CanFrame;
+use crate::decoders::model::CanFrame;
+use crate::sources::candump::{BusNamer, CandumpReader};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -14,14 +14,14 @@
 //! day, so (as the Python) the decode of a frame is memoised by its bytes; a hit costs a hash
 //! lookup and clones.
 
-use crate::flags as F;
-use crate::framing::{ByteStreamDecoder, Framing, Stream, NEED_MORE};
-use crate::hash::FrameMemo;
-use crate::model::{
+use crate::decoders::flags as F;
+use crate::decoders::framing::{ByteStreamDecoder, Framing, Stream, NEED_MORE};
+use crate::decoders::model::{
     Fields, Notes, Record, SharedFields, Str, Text, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE,
 };
+use crate::decoders::registers::{self, opening_mm};
+use crate::hash::FrameMemo;
 use crate::pyfloat::py_repr;
-use crate::registers::{self, opening_mm};
 use std::borrow::Cow;
 use std::fmt::Write;
 use std::sync::{Arc, OnceLock};
@@ -758,66 +758,24 @@ impl Entry {
     }
 }
 
+/// Everything about a frame that depends only on its bytes (`_decode`).
 fn decode(raw: &[u8]) -> Entry {
     let n = raw.len();
     if n < 6 || raw[3] as usize + 5 != n || !matches!((raw[0], raw[1]), (0xEB, 0x90) | (0xEE, 0x16))
     {
-        // the framer only hands over well-framed bytes; this guards direct callers
-        return Entry {
-            direction: None,
-            device: None,
-            code: None,
-            name: None,
-            fields: vec![(key("data"), Value::Str(Cow::Owned(hex(raw))))].into(),
-            summary: Text::from("malformed frame"),
-            errors: vec![format!(
-                "malformed frame: {n} bytes do not fit a header and its length byte"
-            )],
-            warnings: Vec::new(),
-            pair_key: None,
-            expects: false,
-            save: false,
-            flags: vec![F::MALFORMED],
-        };
+        return malformed(raw); // the framer only hands over well-framed bytes
     }
     let direction = if raw[0] == 0xEB { REQUEST } else { RESPONSE };
     let (device, code, data) = (raw[2], raw[4], &raw[5..n - 1]);
     let mut notes = Notes::default();
-    // the header's problems come first
-    let (expected, got) = (checksum(&raw[2..n - 1]), raw[n - 1]);
-    if expected != got {
-        notes.error(
-            F::BAD_CHECKSUM,
-            format!("checksum error: expected 0x{expected:02X}, got 0x{got:02X}"),
-        );
-    }
-    if device == 0 {
-        notes.warn(F::INVALID_ID, "ID 0 is not a valid ID".to_string());
-    } else if device == BROADCAST && direction == RESPONSE {
-        notes.warn(
-            F::BROADCAST,
-            "response from broadcast ID 255 (broadcasts get no response)".to_string(),
-        );
-    }
-    // room for the largest layout (run state: id + 8 values), so nothing grows
+    note_header(raw, direction, &mut notes); // the header's problems come first
+                                             // room for the largest layout (run state: id + 8 values), so nothing grows
     let mut fields: Fields = Vec::with_capacity(9);
     fields.push((key("id"), Value::Int(device as i64)));
     let mut summary = String::with_capacity(128);
     let name: Str = match command_of(code) {
         None => {
-            // a CMD in neither table: still a frame when SUM checks; show its bytes
-            let _ = write!(summary, "unknown command 0x{code:02X}");
-            if !data.is_empty() {
-                summary.push_str(": ");
-                push_hex(&mut summary, data);
-            }
-            notes.warn(
-                F::UNDOCUMENTED,
-                format!(
-                    "unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)"
-                ),
-            );
-            fields.push((key("data"), Value::Str(Cow::Owned(hex(data)))));
+            unknown(code, data, &mut fields, &mut summary, &mut notes);
             Cow::Owned(format!("UNKNOWN_0x{code:02X}"))
         }
         Some(c) => {
@@ -855,6 +813,62 @@ fn decode(raw: &[u8]) -> Entry {
         save: direction == REQUEST && code == cmd::PARA_SAVE,
         flags: notes.flags,
     }
+}
+
+/// The entry of bytes that do not fit a header and its length byte (`_malformed`).
+fn malformed(raw: &[u8]) -> Entry {
+    Entry {
+        direction: None,
+        device: None,
+        code: None,
+        name: None,
+        fields: vec![(key("data"), Value::Str(Cow::Owned(hex(raw))))].into(),
+        summary: Text::from("malformed frame"),
+        errors: vec![format!(
+            "malformed frame: {} bytes do not fit a header and its length byte",
+            raw.len()
+        )],
+        warnings: Vec::new(),
+        pair_key: None,
+        expects: false,
+        save: false,
+        flags: vec![F::MALFORMED],
+    }
+}
+
+/// The header's problems: a checksum that fails, an invalid or broadcast ID (`_note_header`).
+fn note_header(raw: &[u8], direction: &str, notes: &mut Notes) {
+    let n = raw.len();
+    let device = raw[2];
+    let (expected, got) = (checksum(&raw[2..n - 1]), raw[n - 1]);
+    if expected != got {
+        notes.error(
+            F::BAD_CHECKSUM,
+            format!("checksum error: expected 0x{expected:02X}, got 0x{got:02X}"),
+        );
+    }
+    if device == 0 {
+        notes.warn(F::INVALID_ID, "ID 0 is not a valid ID".to_string());
+    } else if device == BROADCAST && direction == RESPONSE {
+        notes.warn(
+            F::BROADCAST,
+            "response from broadcast ID 255 (broadcasts get no response)".to_string(),
+        );
+    }
+}
+
+/// A CMD in neither table: still a frame when SUM checks; its bytes are shown (`_unknown`).
+fn unknown(code: u8, data: &[u8], fields: &mut Fields, summary: &mut String, notes: &mut Notes) {
+    let _ = write!(summary, "unknown command 0x{code:02X}");
+    if !data.is_empty() {
+        summary.push_str(": ");
+        push_hex(summary, data);
+    }
+    notes.warn(
+        F::UNDOCUMENTED,
+        format!("unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)"),
+    );
+    fields.push((key("data"), Value::Str(Cow::Owned(hex(data)))));
 }
 
 /// frame_at for fewer than 4 bytes: 0 as soon as the header is wrong, else wait.
@@ -982,7 +996,7 @@ impl ByteStreamDecoder<Eg2Serial> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::framing::StreamDecoder;
+    use crate::decoders::framing::StreamDecoder;
 
     fn frame(header: [u8; 2], id: u8, code: u8, data: &[u8]) -> Vec<u8> {
         let mut f = vec![header[0], header[1], id, data.len() as u8 + 1, code];
@@ -1075,7 +1089,7 @@ mod tests {
         assert!(out.is_empty()); // not quiet long enough
         d.idle(10.2, &mut out);
         assert_eq!(out.len(), 1);
-        assert_eq!(out[0].kind, crate::model::TRUNCATED);
+        assert_eq!(out[0].kind, crate::decoders::model::TRUNCATED);
         assert_eq!(out[0].t, Some(10.0));
     }
 }

@@ -10,15 +10,15 @@
 use std::borrow::Cow;
 use std::fmt::Write;
 
-use crate::flags as F;
-use crate::modbus::modbus_framing::{
+use crate::decoders::flags as F;
+use crate::decoders::modbus_framing::{
     candidates, crc16, crc_state, function_text, read_response_len, word, Pending, CRC_BAD,
     CRC_SWAPPED_ORDER, KIND, KIND_EXCEPTION, KIND_MULTI, KIND_READ, KIND_SINGLE, READ_COILS,
     READ_DISCRETE, READ_HOLDING, WRITE_COIL, WRITE_COILS, WRITE_MULTIPLE, WRITE_SINGLE,
 };
-use crate::modbus::modbus_registers::{words, Memo};
-use crate::model::{Fields, Notes, PairKey, Str, Value, REQUEST, RESPONSE};
-use crate::registers::is_save_register;
+use crate::decoders::modbus_registers::{words, Memo};
+use crate::decoders::model::{Fields, Notes, PairKey, Str, Value, REQUEST, RESPONSE};
+use crate::decoders::registers::is_save_register;
 
 pub const CRC_SWAPPED: &str = "CRC byte order swapped (high byte first)";
 pub const NO_REQUEST: &str = "read response without a known request: registers unknown";
@@ -177,11 +177,53 @@ pub fn decode(
         return e;
     }
     let mut notes = Notes::default();
-    let n = raw.len();
     let (slave, fc) = (raw[0], raw[1]);
     let func = fc & 0x7F;
     let kind = KIND[fc as usize];
-    let crc = crc.unwrap_or_else(|| crc_state(raw, 0, n));
+    let crc = crc.unwrap_or_else(|| crc_state(raw, 0, raw.len()));
+    note_crc(raw, crc, &mut notes);
+    let direction = direction(raw, pending, hint);
+    note_unexpected(raw, kind, direction, &mut notes);
+    // a response is checked against the request it answers
+    let answers = matches!(pending, Some(p) if p.slave == slave && p.fc == func);
+    let req = if direction == Some(RESPONSE) && answers {
+        pending
+    } else {
+        None
+    };
+    let mut fields: Fields = Vec::with_capacity(8);
+    fields.push((key("slave"), int(slave)));
+    fields.push((key("function"), int(func)));
+    let mut summary = String::with_capacity(SUMMARY_CAPACITY);
+    let (name, is_save) = body(
+        memo,
+        raw,
+        kind,
+        direction,
+        req,
+        &mut fields,
+        &mut summary,
+        &mut notes,
+    );
+    let (pair_key, expects, next) = pairing(raw, direction, crc);
+    Entry {
+        direction,
+        name,
+        fields,
+        summary,
+        errors: notes.errors,
+        warnings: notes.warnings,
+        pair_key,
+        expects_response: expects,
+        is_save: is_save && direction == Some(REQUEST),
+        next,
+        flags: notes.flags,
+    }
+}
+
+/// A CRC that fails, or holds with its two bytes swapped, is noted (`_note_crc`).
+fn note_crc(raw: &[u8], crc: u8, notes: &mut Notes) {
+    let n = raw.len();
     if crc == CRC_SWAPPED_ORDER {
         notes.warn(F::SWAPPED_CRC, CRC_SWAPPED.to_string());
     } else if crc == CRC_BAD {
@@ -197,7 +239,12 @@ pub fn decode(
             ),
         );
     }
-    let direction = direction(raw, pending, hint);
+}
+
+/// A function the EG2 does not document, or a response from the broadcast address
+/// (`_note_unexpected`).
+fn note_unexpected(raw: &[u8], kind: u8, direction: Option<&'static str>, notes: &mut Notes) {
+    let (slave, fc) = (raw[0], raw[1]);
     if kind != KIND_EXCEPTION && !is_eg2_function(fc) {
         notes.warn(
             F::UNDOCUMENTED,
@@ -213,55 +260,31 @@ pub fn decode(
             "response from address 0 (broadcast requests get no response)".to_string(),
         );
     }
-    // a response is checked against the request it answers
-    let answers = matches!(pending, Some(p) if p.slave == slave && p.fc == func);
-    let req = if direction == Some(RESPONSE) && answers {
-        pending
-    } else {
-        None
-    };
-    let mut fields: Fields = Vec::with_capacity(8);
-    fields.push((key("slave"), int(slave)));
-    fields.push((key("function"), int(func)));
-    let mut summary = String::with_capacity(SUMMARY_CAPACITY);
-    let (name, mut is_save) = body(
-        memo,
-        raw,
-        kind,
-        direction,
-        req,
-        &mut fields,
-        &mut summary,
-        &mut notes,
-    );
-    let (pair_key, expects, next) = if direction == Some(REQUEST) {
-        let expects = slave != BROADCAST;
-        let next = expects.then(|| Pending {
-            slave,
-            fc,
-            a: word(raw, 2),
-            b: word(raw, 4),
-            crc_ok: crc != CRC_BAD,
-        });
-        (Some([slave as i64, fc as i64]), expects, next)
-    } else {
-        is_save = false;
-        let key = (direction == Some(RESPONSE)).then_some([slave as i64, func as i64]);
-        (key, false, None)
-    };
-    Entry {
-        direction,
-        name,
-        fields,
-        summary,
-        errors: notes.errors,
-        warnings: notes.warnings,
-        pair_key,
-        expects_response: expects,
-        is_save,
-        next,
-        flags: notes.flags,
+}
+
+/// (pair key, expects a response, the request now pending) of a frame (`_pairing`).
+fn pairing(
+    raw: &[u8],
+    direction: Option<&'static str>,
+    crc: u8,
+) -> (Option<[i64; 2]>, bool, Option<Pending>) {
+    let (slave, fc) = (raw[0], raw[1]);
+    if direction != Some(REQUEST) {
+        let key = (direction == Some(RESPONSE)).then_some([slave as i64, (fc & 0x7F) as i64]);
+        return (key, false, None);
     }
+    let key = Some([slave as i64, fc as i64]);
+    if slave == BROADCAST {
+        return (key, false, None);
+    }
+    let next = Pending {
+        slave,
+        fc,
+        a: word(raw, 2),
+        b: word(raw, 4),
+        crc_ok: crc != CRC_BAD,
+    };
+    (key, true, Some(next))
 }
 
 /// Name and is_save of a well-shaped frame; its values go into fields, its summary into

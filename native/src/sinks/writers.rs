@@ -11,9 +11,9 @@
 //! Each writer formats into a scratch `String` of its own (json.rs and pyfloat.rs write to a
 //! `String`) and appends its bytes to `out`: no allocation per record once the scratch has grown.
 
-use crate::flags::ESTIMATED_TIME;
+use crate::decoders::flags::ESTIMATED_TIME;
+use crate::decoders::model::{Record, Segment, FRAME, REQUEST, RESPONSE};
 use crate::json::{push_ascii, push_int as push_i64, push_map, push_str, push_u64};
-use crate::model::{Record, Segment, FRAME, REQUEST, RESPONSE};
 use crate::pyfloat::{push_json_float, push_py_repr};
 use std::fmt::Write;
 use std::ops::Range;
@@ -662,7 +662,7 @@ impl RecordWriter for TextWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Value, EG2_SERIAL, GARBAGE};
+    use crate::decoders::model::{Value, EG2_SERIAL, GARBAGE};
     use std::borrow::Cow;
     use std::sync::Arc;
 

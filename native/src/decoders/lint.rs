@@ -6,10 +6,10 @@
 //!
 //! Both need timestamps; records without `t` pass untouched (raw byte dumps have none).
 
-use crate::flags::{CLOSER_THAN_5MS, DURING_SAVE};
+use crate::decoders::flags::{CLOSER_THAN_5MS, DURING_SAVE};
+use crate::decoders::model::{Record, FRAME, REQUEST};
+use crate::decoders::pairing::StreamIds;
 use crate::hash::FastMap;
-use crate::model::{Record, FRAME, REQUEST};
-use crate::pairing::StreamIds;
 use crate::pyfloat::py_fixed;
 
 pub const MIN_GAP_S: f64 = 0.005;
@@ -72,7 +72,7 @@ impl TimingLinter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::EG2_SERIAL;
+    use crate::decoders::model::EG2_SERIAL;
     use std::sync::Arc;
 
     fn req(t: f64, device: i64, save: bool) -> Record {

@@ -11,7 +11,7 @@
 
 use std::borrow::Cow;
 
-use crate::model::Str;
+use crate::decoders::model::Str;
 use crate::pyfloat::{push_py_repr, py_round};
 
 /// 1000 = 70 mm (section 0)

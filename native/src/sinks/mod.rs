@@ -1,0 +1,3 @@
+//! The text output formats, mirroring analyzer/sinks/ (jsonl, csv, text).
+
+pub mod writers;

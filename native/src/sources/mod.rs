@@ -1,0 +1,5 @@
+//! Capture readers, each mirroring the module of the same name in analyzer/sources/.
+
+pub mod candump;
+pub mod capture;
+pub mod sniff;
