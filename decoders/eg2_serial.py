@@ -37,14 +37,17 @@ from .registers import fault_text, opening_mm, state_text
 __all__ = [
     "BROADCAST",
     "COMMANDS",
+    "ID_RANGE",
     "REQUEST_HEADER",
     "RESPONSE_HEADER",
+    "RUN_STATE",
     "STATUS_FAILED",
     "STATUS_OK",
     "Cmd",
     "Command",
     "Eg2SerialDecoder",
     "Field",
+    "RunStateValue",
     "checksum",
 ]
 
@@ -154,8 +157,26 @@ LIMIT_MIN = Field("min", "H", "min", "mm", 0, 1000)
 SEEK_POSITION = Field("position", "H", "position", "mm", 1, 1000)  # the 0x54 section: 1-1000
 ACT_POSITION = Field("position", "H", "position", "mm", 0, 1000)
 
-_RUNSTATE = struct.Struct("<BBBHH")  # state, fault, temperature, position, force setting
-_ID_RANGE = (1, 254)
+
+@dataclass(frozen=True, slots=True)
+class RunStateValue:
+    """One value of the 0x41 reply, in wire order: the one home of that layout (the tracker,
+    the hex pane's spans and the native crate read it from here)."""
+
+    key: str  # name in Record.fields
+    fmt: str  # struct code, little endian: "B" u8, "H" u16
+    state: str  # the device-state field it reports (analyzer/tracker.py)
+
+
+RUN_STATE: Final = (
+    RunStateValue("state", "B", "state"),
+    RunStateValue("fault", "B", "fault"),
+    RunStateValue("temperature_c", "B", "temperature_c"),
+    RunStateValue("position", "H", "opening"),
+    RunStateValue("force_setting_g", "H", "force_setting"),
+)
+_RUNSTATE = struct.Struct("<" + "".join(v.fmt for v in RUN_STATE))
+ID_RANGE: Final = (1, 254)  # the IDs a gripper can be set to
 
 
 def _words(n: int) -> str:
@@ -252,7 +273,7 @@ def _set_id(cmd: Command, direction: str, data: bytes, device: int, notes: Notes
         new_id, width = data[0] | data[1] << 8, 2
     else:
         return _mismatch(cmd, direction, "1 or 2 data bytes", data, notes)
-    lo, hi = _ID_RANGE
+    lo, hi = ID_RANGE
     if not lo <= new_id <= hi:
         notes.warn(F.OUT_OF_RANGE, f"new_id out of range ({lo}-{hi}): {new_id}")
     if device == BROADCAST:
