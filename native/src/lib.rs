@@ -12,6 +12,7 @@ pub mod candump;
 pub mod detect;
 pub mod flags;
 pub mod framing;
+pub mod generated;
 pub mod hash;
 pub mod json;
 pub mod lint;
