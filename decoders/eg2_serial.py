@@ -241,7 +241,7 @@ def _compile(cmd: Command, direction: str, layout: Layout) -> DecodeFn:
                 fields[mm_key] = _mm(v)
                 parts.append(f"{label}={v} ({_mm_text(v)} mm)")
             if not lo <= v <= hi:
-                notes.warn_of(M.SERIAL_OUT_OF_RANGE, label=label, lo=lo, hi=hi, value=v)
+                notes.warn_of(M.VALUE_OUT_OF_RANGE, label=label, lo=lo, hi=hi, value=v)
         return fields, " ".join(parts)
 
     return decode
@@ -280,7 +280,7 @@ def _set_id(cmd: Command, direction: str, data: bytes, device: int, notes: Notes
         return _mismatch(cmd, direction, "1 or 2 data bytes", data, notes)
     lo, hi = ID_RANGE
     if not lo <= new_id <= hi:
-        notes.warn_of(M.SERIAL_OUT_OF_RANGE, label="new_id", lo=lo, hi=hi, value=new_id)
+        notes.warn_of(M.VALUE_OUT_OF_RANGE, label="new_id", lo=lo, hi=hi, value=new_id)
     if device == BROADCAST:
         notes.warn_of(M.SERIAL_SET_ID_BROADCAST)
     summary = f"set ID {device} -> {new_id}" + (" (2-byte value)" if width == 2 else "")
@@ -314,7 +314,7 @@ def _run_state(cmd: Command, direction: str, data: bytes, device: int, notes: No
             notes.warn_of(M.SERIAL_DEVICE_FAULT, faults=faults)
         elif spec.lo is not None and spec.hi is not None and not spec.lo <= value <= spec.hi:
             notes.warn_of(
-                M.SERIAL_OUT_OF_RANGE, label=spec.label, lo=spec.lo, hi=spec.hi, value=value
+                M.VALUE_OUT_OF_RANGE, label=spec.label, lo=spec.lo, hi=spec.hi, value=value
             )
     return fields, summary
 

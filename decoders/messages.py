@@ -4,7 +4,8 @@ texts both engines say (``native/codegen.py`` writes the crate's copy from this 
 A message is a ``str.format`` template with named fields; the crate gets a constant for a
 message without fields and a macro around ``format!`` (which takes the same ``{name}`` and
 ``{name:02X}``) for the others. The catalogue holds the serial decoder's messages
-(``decoders/eg2_serial.py``); a decoder's summary lines are not messages.
+(``decoders/eg2_serial.py``) and the range warning every protocol writes; a decoder's summary
+lines are not messages.
 """
 
 from __future__ import annotations
@@ -31,6 +32,9 @@ class Message:
         return tuple(dict.fromkeys(names))
 
 
+# -- every protocol (decoders/registers.py: Register.range_warning) --------------------------
+VALUE_OUT_OF_RANGE: Final = Message(F.OUT_OF_RANGE, "{label} out of range ({lo}-{hi}): {value}")
+
 # -- the serial protocol (decoders/eg2_serial.py) -------------------------------------------
 SERIAL_FRAME_SHAPE: Final = Message(
     F.MALFORMED, "malformed frame: {length} bytes do not fit a header and its length byte"
@@ -47,7 +51,6 @@ SERIAL_UNKNOWN_COMMAND: Final = Message(
     "unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)",
 )
 SERIAL_LAYOUT: Final = Message(F.MALFORMED, "{name} {direction}: expected {expected}, got {length}")
-SERIAL_OUT_OF_RANGE: Final = Message(F.OUT_OF_RANGE, "{label} out of range ({lo}-{hi}): {value}")
 SERIAL_WRITE_FAILED: Final = Message(
     F.WRITE_FAILED, "write failure status 0x55 (the host should resend)"
 )

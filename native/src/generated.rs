@@ -721,6 +721,18 @@ pub mod csv {
 
 /// decoders/messages.py: the errors' and warnings' words, by flag code.
 pub mod messages {
+    // out_of_range
+    /// `VALUE_OUT_OF_RANGE`: `value_out_of_range!(label = .., lo = .., hi = .., value = ..)`
+    macro_rules! value_out_of_range {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::OUT_OF_RANGE,
+                format!("{label} out of range ({lo}-{hi}): {value}", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use value_out_of_range;
+
     // malformed
     /// `SERIAL_FRAME_SHAPE`: `serial_frame_shape!(length = ..)`
     macro_rules! serial_frame_shape {
@@ -798,18 +810,6 @@ pub mod messages {
         };
     }
     pub(crate) use serial_unknown_status;
-
-    // out_of_range
-    /// `SERIAL_OUT_OF_RANGE`: `serial_out_of_range!(label = .., lo = .., hi = .., value = ..)`
-    macro_rules! serial_out_of_range {
-        ($($arg:tt)*) => {
-            (
-                $crate::generated::flags::OUT_OF_RANGE,
-                format!("{label} out of range ({lo}-{hi}): {value}", $($arg)*),
-            )
-        };
-    }
-    pub(crate) use serial_out_of_range;
 
     // write_failed
     /// `SERIAL_WRITE_FAILED`

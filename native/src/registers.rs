@@ -5,12 +5,14 @@
 //! `CAN address = 1000 + 2 * (register - 1000)` (section 3.1). Run-state and fault-bit texts
 //! (section 1.3) live here too: all three protocols use them.
 //!
-//! The table is a static array of `Register`s; placeholders for registers the manual does not
+//! The table is a static array of `Register`s (written from the Python's by
+//! `native/codegen.py`, in `generated.rs`); placeholders for registers the manual does not
 //! describe are built on demand (their names are formatted), so lookups hand out
 //! `Cow<'static, Register>`: borrowed from the table in the usual case.
 
 use std::borrow::Cow;
 
+use crate::generated::messages::value_out_of_range;
 use crate::model::Str;
 use crate::pyfloat::{push_py_repr, py_round};
 
@@ -103,7 +105,9 @@ impl Register {
     pub fn range_warning(&self, value: i64) -> Option<String> {
         match (self.lo, self.hi) {
             (Some(lo), Some(hi)) if !(lo <= value && value <= hi) => {
-                Some(format!("{} out of range ({lo}-{hi}): {value}", self.key))
+                let (_, text) =
+                    value_out_of_range!(label = self.key, lo = lo, hi = hi, value = value);
+                Some(text)
             }
             _ => None,
         }

@@ -320,7 +320,7 @@ impl Payload<'_> {
                 }
             }
             if !(f.lo <= v && v <= f.hi) {
-                self.notes.warn_of(M::serial_out_of_range!(
+                self.notes.warn_of(M::value_out_of_range!(
                     label = f.label,
                     lo = f.lo,
                     hi = f.hi,
@@ -361,7 +361,7 @@ impl Payload<'_> {
         };
         let (lo, hi) = ID_RANGE;
         if !(lo <= new_id && new_id <= hi) {
-            self.notes.warn_of(M::serial_out_of_range!(
+            self.notes.warn_of(M::value_out_of_range!(
                 label = "new_id",
                 lo = lo,
                 hi = hi,
@@ -421,7 +421,7 @@ impl Payload<'_> {
                 }
             } else if let (Some(lo), Some(hi)) = (spec.lo, spec.hi) {
                 if !(lo..=hi).contains(&value) {
-                    self.notes.warn_of(M::serial_out_of_range!(
+                    self.notes.warn_of(M::value_out_of_range!(
                         label = spec.label,
                         lo = lo,
                         hi = hi,
