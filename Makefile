@@ -5,7 +5,9 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 NATIVE := $(VENV)/.native
 # the native core's sources: the extension analyzer._native is rebuilt when one changes
-NATIVE_SRC := $(wildcard native/Cargo.toml native/Cargo.lock native/src/*.rs native/src/*/*.rs)
+# (native/src/generated.rs among them: native/codegen.py writes it from the Python tables)
+NATIVE_SRC := $(wildcard native/Cargo.toml native/Cargo.lock native/src/*.rs native/src/*/*.rs) \
+	native/src/generated.rs
 
 .PHONY: venv native demo test lint typecheck unit rust bench clean
 
@@ -21,8 +23,10 @@ $(STAMP): pyproject.toml
 
 # The native core (Rust, native/) is built by pip through setuptools-rust when cargo is on the
 # PATH; without a Rust toolchain the install goes on in pure Python (eg2scope --version says
-# which). Rebuilt here when its sources change; `make native` forces it.
+# which). Rebuilt here when its sources change; `make native` forces it, and first writes the
+# crate's tables from the Python ones (native/codegen.py: plain Python, no cargo needed).
 $(NATIVE): $(STAMP) $(NATIVE_SRC)
+	$(BIN)/python native/codegen.py
 	@rm -f analyzer/_native*.so  # a failed build must not leave the old core in place
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	@touch $(NATIVE)

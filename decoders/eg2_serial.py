@@ -28,7 +28,7 @@ from enum import IntEnum
 from functools import partial
 from typing import Any, Final
 
-from . import flags as F
+from . import messages as M
 from .framing import NEED_MORE, ByteStreamDecoder
 from .model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
 from .notes import Notes
@@ -37,14 +37,17 @@ from .registers import fault_text, opening_mm, state_text
 __all__ = [
     "BROADCAST",
     "COMMANDS",
+    "ID_RANGE",
     "REQUEST_HEADER",
     "RESPONSE_HEADER",
+    "RUN_STATE",
     "STATUS_FAILED",
     "STATUS_OK",
     "Cmd",
     "Command",
     "Eg2SerialDecoder",
     "Field",
+    "RunStateValue",
     "checksum",
 ]
 
@@ -154,8 +157,29 @@ LIMIT_MIN = Field("min", "H", "min", "mm", 0, 1000)
 SEEK_POSITION = Field("position", "H", "position", "mm", 1, 1000)  # the 0x54 section: 1-1000
 ACT_POSITION = Field("position", "H", "position", "mm", 0, 1000)
 
-_RUNSTATE = struct.Struct("<BBBHH")  # state, fault, temperature, position, force setting
-_ID_RANGE = (1, 254)
+
+@dataclass(frozen=True, slots=True)
+class RunStateValue:
+    """One value of the 0x41 reply, in wire order: the one home of that layout (the tracker,
+    the hex pane's spans and the native crate read it from here)."""
+
+    key: str  # name in Record.fields
+    fmt: str  # struct code, little endian: "B" u8, "H" u16
+    state: str  # the device-state field it reports (analyzer/tracker.py)
+    label: str  # name in range warnings
+    lo: int | None = None  # documented range, None where the manual gives none
+    hi: int | None = None
+
+
+RUN_STATE: Final = (
+    RunStateValue("state", "B", "state", "state", 1, 6),
+    RunStateValue("fault", "B", "fault", "fault"),  # bits: a fault is warned of, not a range
+    RunStateValue("temperature_c", "B", "temperature_c", "temperature"),
+    RunStateValue("position", "H", "opening", "position", 0, 1000),
+    RunStateValue("force_setting_g", "H", "force_setting", "force setting", 50, 1000),
+)
+_RUNSTATE = struct.Struct("<" + "".join(v.fmt for v in RUN_STATE))
+ID_RANGE: Final = (1, 254)  # the IDs a gripper can be set to
 
 
 def _words(n: int) -> str:
@@ -169,7 +193,9 @@ def _mismatch(cmd: Command, direction: str, expected: str, data: bytes, notes: N
         # the hand's form of this code carries a list of u16 (section 1.2)
         fields["values"] = _u16_list(data)[0]
     head = cmd.verb if direction == REQUEST else "->"
-    notes.error(F.MALFORMED, f"{cmd.name} {direction}: expected {expected}, got {len(data)}")
+    notes.error_of(
+        M.SERIAL_LAYOUT, name=cmd.name, direction=direction, expected=expected, length=len(data)
+    )
     return fields, f"{head} unexpected data {_hex(data) or '(none)'}"
 
 
@@ -215,7 +241,7 @@ def _compile(cmd: Command, direction: str, layout: Layout) -> DecodeFn:
                 fields[mm_key] = _mm(v)
                 parts.append(f"{label}={v} ({_mm_text(v)} mm)")
             if not lo <= v <= hi:
-                notes.warn(F.OUT_OF_RANGE, f"{label} out of range ({lo}-{hi}): {v}")
+                notes.warn_of(M.VALUE_OUT_OF_RANGE, label=label, lo=lo, hi=hi, value=v)
         return fields, " ".join(parts)
 
     return decode
@@ -237,10 +263,10 @@ def _status(cmd: Command, direction: str, data: bytes, device: int, notes: Notes
     if b == STATUS_OK:
         return {"status": "ok"}, "-> ok"
     if b == STATUS_FAILED:
-        notes.warn(F.WRITE_FAILED, "write failure status 0x55 (the host should resend)")
+        notes.warn_of(M.SERIAL_WRITE_FAILED)
         return {"status": "failure"}, "-> FAILED (0x55)"
     # a status the manual does not list: not said to have failed, not said to be ok
-    notes.warn(F.UNDOCUMENTED, f"unknown status byte 0x{b:02X} (0x01 is ok, 0x55 failure)")
+    notes.warn_of(M.SERIAL_UNKNOWN_STATUS, status=b)
     return {"status": f"unknown 0x{b:02X}"}, f"-> unknown status 0x{b:02X}"
 
 
@@ -252,13 +278,11 @@ def _set_id(cmd: Command, direction: str, data: bytes, device: int, notes: Notes
         new_id, width = data[0] | data[1] << 8, 2
     else:
         return _mismatch(cmd, direction, "1 or 2 data bytes", data, notes)
-    lo, hi = _ID_RANGE
+    lo, hi = ID_RANGE
     if not lo <= new_id <= hi:
-        notes.warn(F.OUT_OF_RANGE, f"new_id out of range ({lo}-{hi}): {new_id}")
+        notes.warn_of(M.VALUE_OUT_OF_RANGE, label="new_id", lo=lo, hi=hi, value=new_id)
     if device == BROADCAST:
-        notes.warn(
-            F.BROADCAST, "set ID sent to broadcast: every gripper on the bus takes the new ID"
-        )
+        notes.warn_of(M.SERIAL_SET_ID_BROADCAST)
     summary = f"set ID {device} -> {new_id}" + (" (2-byte value)" if width == 2 else "")
     return {"new_id": new_id, "id_width": width}, summary
 
@@ -267,7 +291,8 @@ def _run_state(cmd: Command, direction: str, data: bytes, device: int, notes: No
     """0x41 reply: state u8, fault u8, temperature u8, position u16, force setting u16."""
     if len(data) != _RUNSTATE.size:
         return _mismatch(cmd, direction, _words(_RUNSTATE.size), data, notes)
-    state, fault, temp, pos, force = _RUNSTATE.unpack(data)
+    values = _RUNSTATE.unpack(data)
+    state, fault, temp, pos, force = values
     text, mm = _STATE_TEXT[state], _mm(pos)
     fields = {
         "state": state,
@@ -284,14 +309,13 @@ def _run_state(cmd: Command, direction: str, data: bytes, device: int, notes: No
         f"-> state={state} {text}, {faults}, {temp} °C, "
         f"position={pos} ({_mm_text(pos)} mm), force setting={force} g"
     )
-    if not 1 <= state <= 6:
-        notes.warn(F.OUT_OF_RANGE, f"state out of range (1-6): {state}")
-    if fault:
-        notes.warn(F.DEVICE_FAULT, f"gripper reports fault: {faults}")
-    if not 0 <= pos <= 1000:
-        notes.warn(F.OUT_OF_RANGE, f"position out of range (0-1000): {pos}")
-    if not 50 <= force <= 1000:
-        notes.warn(F.OUT_OF_RANGE, f"force setting out of range (50-1000): {force}")
+    for spec, value in zip(RUN_STATE, values, strict=True):
+        if spec.key == "fault" and value:  # fault bits, not a range
+            notes.warn_of(M.SERIAL_DEVICE_FAULT, faults=faults)
+        elif spec.lo is not None and spec.hi is not None and not spec.lo <= value <= spec.hi:
+            notes.warn_of(
+                M.VALUE_OUT_OF_RANGE, label=spec.label, lo=spec.lo, hi=spec.hi, value=value
+            )
     return fields, summary
 
 
@@ -390,10 +414,7 @@ for _cmd in COMMANDS.values():
 def _unknown(code: int, data: bytes, notes: Notes) -> Decoded:
     """A CMD in neither table: still a frame when SUM checks; show its bytes (section 1.2)."""
     summary = f"unknown command 0x{code:02X}" + (f": {_hex(data)}" if data else "")
-    notes.warn(
-        F.UNDOCUMENTED,
-        f"unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)",
-    )
+    notes.warn_of(M.SERIAL_UNKNOWN_COMMAND, code=code)
     return {"data": _hex(data)}, summary
 
 
@@ -456,7 +477,7 @@ def _decode(raw: bytes) -> _Entry:
 
 def _malformed(raw: bytes) -> _Entry:
     """The entry of bytes that do not fit a header and its length byte (direct callers)."""
-    error = f"malformed frame: {len(raw)} bytes do not fit a header and its length byte"
+    error = M.SERIAL_FRAME_SHAPE.text(length=len(raw))
     return (
         None,
         None,
@@ -469,7 +490,7 @@ def _malformed(raw: bytes) -> _Entry:
         None,
         False,
         False,
-        (F.MALFORMED,),
+        (M.SERIAL_FRAME_SHAPE.code,),
     )
 
 
@@ -478,11 +499,11 @@ def _note_header(raw: bytes, direction: str, notes: Notes) -> None:
     device = raw[2]
     expected, got = sum(raw[2:-1]) & 0xFF, raw[-1]
     if expected != got:
-        notes.error(F.BAD_CHECKSUM, f"checksum error: expected 0x{expected:02X}, got 0x{got:02X}")
+        notes.error_of(M.SERIAL_CHECKSUM, expected=expected, got=got)
     if device == 0:
-        notes.warn(F.INVALID_ID, "ID 0 is not a valid ID")
+        notes.warn_of(M.SERIAL_ID_ZERO)
     elif device == BROADCAST and direction == RESPONSE:
-        notes.warn(F.BROADCAST, "response from broadcast ID 255 (broadcasts get no response)")
+        notes.warn_of(M.SERIAL_BROADCAST_RESPONSE)
 
 
 # Records are built positionally: keyword construction of the 22-field dataclass costs 2.5x as

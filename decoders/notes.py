@@ -6,6 +6,11 @@ programs; collecting both in one call keeps every text with its code.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .messages import Message
+
 
 class Notes:
     """Errors, warnings and their flag codes, in the order they were found (codes once)."""
@@ -26,6 +31,14 @@ class Notes:
         self.warnings.append(text)
         if code not in self.flags:
             self.flags.append(code)
+
+    def error_of(self, message: Message, **values: object) -> None:
+        """An error in a catalogue's words (``decoders/messages.py``), with its code."""
+        self.error(message.code, message.text(**values))
+
+    def warn_of(self, message: Message, **values: object) -> None:
+        """A warning in a catalogue's words (``decoders/messages.py``), with its code."""
+        self.warn(message.code, message.text(**values))
 
     def flag(self, code: str) -> None:
         """A code without words (the record says it otherwise, as an exception response

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .messages import VALUE_OUT_OF_RANGE
+
 STROKE_MM = 70.0  # 1000 = 70 mm (section 0)
 
 STATE_TEXT: dict[int, str] = {
@@ -74,7 +76,7 @@ class Register:
     def range_warning(self, value: int) -> str | None:
         if self.lo is None or self.hi is None or self.lo <= value <= self.hi:
             return None
-        return f"{self.key} out of range ({self.lo}-{self.hi}): {value}"
+        return VALUE_OUT_OF_RANGE.text(label=self.key, lo=self.lo, hi=self.hi, value=value)
 
     def describe(self, value: int) -> str:
         """``target_opening=500 (35.0 mm)``, ``temperature_c=37 °C``, ``state=1 (fully open,

@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Final
 
-from decoders.eg2_serial import Cmd
+from decoders.eg2_serial import RUN_STATE, Cmd
 from decoders.flags import OUT_OF_RANGE, UNANSWERED
 from decoders.model import EG2_SERIAL, FRAME, REQUEST, RESPONSE, Record
 from decoders.registers import BY_NAME
@@ -53,13 +53,7 @@ COUNTERS: Final = ("frames", "errors", "unanswered")
 VALUE_KEYS: Final = (*READINGS, *SETTINGS, "last_command", "latency_ms", *COUNTERS)
 
 # serial run-state response key -> state field
-_RUN_STATE: Final = (
-    ("state", "state"),
-    ("fault", "fault"),
-    ("temperature_c", "temperature_c"),
-    ("position", "opening"),
-    ("force_setting_g", "force_setting"),
-)
+_RUN_STATE: Final = tuple((v.key, v.state) for v in RUN_STATE)
 
 
 class DeviceState:

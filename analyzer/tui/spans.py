@@ -14,18 +14,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
-from decoders.eg2_serial import COMMANDS, Cmd, Field
+from decoders.eg2_serial import COMMANDS, RUN_STATE, Cmd, Field
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
 
 Path = tuple[str, ...]
 FRAME_PART: Final = "frame"
-RUN_STATE_LAYOUT: Final = (
-    ("state", 1),
-    ("fault", 1),
-    ("temperature_c", 1),
-    ("position", 2),
-    ("force_setting_g", 2),
-)
+RUN_STATE_LAYOUT: Final = tuple((v.key, struct.calcsize("<" + v.fmt)) for v in RUN_STATE)
 
 
 @dataclass(frozen=True, slots=True)

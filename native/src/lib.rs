@@ -6,6 +6,7 @@
 
 mod alloc;
 pub mod decoders;
+pub mod generated;
 pub mod hash;
 pub mod json;
 pub mod parquet;

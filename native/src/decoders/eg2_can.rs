@@ -21,45 +21,18 @@ use crate::decoders::model::{
 use crate::decoders::model::{REQUEST, RESPONSE};
 use crate::decoders::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
 
-pub const OPERATIONS: [&str; 4] = ["read", "write", "positioning move", "servo follow"];
-pub const OP_READ: u32 = 0;
-pub const OP_WRITE: u32 = 1;
+pub use crate::generated::can::{
+    BROADCAST, CAN_ERR_CLASSES, MAP_FIRST, MAP_LAST, MAX_ID, MEMO_LIMIT, OPERATIONS, OP_READ,
+    OP_WRITE, PENDING_LIMIT, PENDING_TIMEOUT_S, RESERVED_BIT,
+};
 
-/// device 16383
-pub const BROADCAST: u32 = 0x3FFF;
-/// 0 on every EG2 frame
-pub const RESERVED_BIT: u32 = 1 << 28;
-pub const MAX_ID: u32 = 0x1FFF_FFFF;
-/// CAN byte addresses of registers 1001 ... 1065
-pub const MAP_FIRST: i64 = 1002;
-pub const MAP_LAST: i64 = 1130;
-
-/// A pending request older than this is forgotten (only when both frames carry a time).
-pub const PENDING_TIMEOUT_S: f64 = 2.0;
-/// Memo sizes (the Python's; reaching them only empties a cache, the output is the same).
-pub const MEMO_LIMIT: usize = 50_000;
-/// Here the memos of decodes are smaller than the Python's (each decode keeps its JSON text
+/// Memo sizes: the Python's MEMO_LIMIT (reaching it only empties a cache, the output is the
+/// same), but here the memos of decodes are smaller than the Python's (each decode keeps its JSON text
 /// too): at most two generations of this many (crate::hash::FrameMemo), and this many layouts;
 /// benchmark traffic hits as often, and hostile input (every frame new) stays in a few MB.
 const MEMO_GENERATION: usize = 2048;
 const LAYOUT_LIMIT: usize = 4096;
-/// Pending table size: reaching it forgets every pending request (this one changes output,
-/// exactly as in the Python).
-pub const PENDING_LIMIT: usize = 50_000;
 const VALUE_CACHE_LIMIT: usize = 1 << 14;
-
-/// SocketCAN error classes (linux/can/error.h), carried in an error frame's identifier.
-const CAN_ERR_CLASSES: [(u32, &str); 9] = [
-    (0x001, "TX timeout"),
-    (0x002, "lost arbitration"),
-    (0x004, "controller problem"),
-    (0x008, "protocol violation"),
-    (0x010, "transceiver status"),
-    (0x020, "no ACK on transmission"),
-    (0x040, "bus off"),
-    (0x080, "bus error"),
-    (0x100, "controller restarted"),
-];
 
 // direction tags
 const TAG_REQUEST: u32 = 0;

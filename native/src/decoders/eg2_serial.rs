@@ -14,49 +14,21 @@
 //! day, so (as the Python) the decode of a frame is memoised by its bytes; a hit costs a hash
 //! lookup and clones.
 
-use crate::decoders::flags as F;
 use crate::decoders::framing::{ByteStreamDecoder, Framing, Stream, NEED_MORE};
 use crate::decoders::model::{
     Fields, Notes, Record, SharedFields, Str, Text, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE,
 };
 use crate::decoders::registers::{self, opening_mm};
+use crate::generated::messages as M;
 use crate::hash::FrameMemo;
 use crate::pyfloat::py_repr;
 use std::borrow::Cow;
 use std::fmt::Write;
 use std::sync::{Arc, OnceLock};
 
-/// The CMD byte of the gripper's commands (the manual's names without `CMD_MC_`).
-pub mod cmd {
-    pub const PARA_SAVE: u8 = 0x01;
-    pub const PARA_ID_SET: u8 = 0x04;
-    pub const MOVE_CATCH_XG: u8 = 0x10;
-    pub const MOVE_RELEASE: u8 = 0x11;
-    pub const SET_EG_PARA: u8 = 0x12;
-    pub const READ_EG_PARA: u8 = 0x13;
-    pub const READ_EG_STATE: u8 = 0x14;
-    pub const MOVE_STOPHERE: u8 = 0x16;
-    pub const ERROR_CLR: u8 = 0x17;
-    pub const MOVE_CATCH2_XG: u8 = 0x18;
-    pub const READ_EG_RUNSTATE: u8 = 0x41;
-    pub const SET_DRVALL_SPEED: u8 = 0x51;
-    pub const SET_DRVALL_YBP_THRESHOLD: u8 = 0x52;
-    pub const SEEKPOS: u8 = 0x54;
-    pub const READ_DRVALL_SPEED: u8 = 0xD2;
-    pub const READ_DRVALL_YBP_THRESHOLD: u8 = 0xD3;
-    pub const READ_DRVALL_SEEKGYHANGLE: u8 = 0xD7;
-    pub const READ_ACTPOS: u8 = 0xD9;
-    pub const READ_HAND_STATUS: u8 = 0xDC;
-}
-
-/// Every gripper executes it, none answers.
-pub const BROADCAST: u8 = 255;
-/// The one status byte that answers a write or an action (section 1.1).
-pub const STATUS_OK: u8 = 0x01;
-/// "resend the command"
-pub const STATUS_FAILED: u8 = 0x55;
-
-const ID_RANGE: (i64, i64) = (1, 254);
+pub use crate::generated::serial::{
+    cmd, BROADCAST, COMMANDS, ID_RANGE, RUN_STATE, RUN_STATE_SIZE, STATUS_FAILED, STATUS_OK,
+};
 
 // -- the texts shared with the other protocols (registers.py) ---------------------------------
 
@@ -154,210 +126,33 @@ pub struct Command {
     pub alias: Option<&'static str>,
 }
 
-const fn field(
-    key: &'static str,
-    mm_key: Option<&'static str>,
-    label: &'static str,
-    unit: &'static str,
-    lo: i64,
-    hi: i64,
-) -> Field {
-    Field {
-        key,
-        mm_key,
-        fmt: Fmt::U16,
-        label,
-        unit,
-        lo,
-        hi,
-    }
+/// One value of the 0x41 reply (Python `RunStateValue`): its place, and the state field it
+/// reports (an index into `tracker::VALUE_KEYS`).
+#[derive(Clone, Copy, Debug)]
+pub struct RunStateValue {
+    /// name in Record.fields
+    pub key: &'static str,
+    pub offset: usize,
+    /// 1 (u8) or 2 (u16 little endian)
+    pub width: usize,
+    pub state: usize,
+    /// name in range warnings
+    pub label: &'static str,
+    /// documented range, None where the manual gives none
+    pub lo: Option<i64>,
+    pub hi: Option<i64>,
 }
 
-const SPEED: Field = field("speed", None, "speed", "", 1, 1000);
-const FORCE: Field = field("force_g", None, "force", "g", 50, 1000);
-const LIMIT_MAX: Field = field("max", Some("max_mm"), "max", "mm", 0, 1000);
-const LIMIT_MIN: Field = field("min", Some("min_mm"), "min", "mm", 0, 1000);
-/// the 0x54 section: 1-1000
-const SEEK_POSITION: Field = field("position", Some("position_mm"), "position", "mm", 1, 1000);
-const ACT_POSITION: Field = field("position", Some("position_mm"), "position", "mm", 0, 1000);
-
-const SEEK_ALIAS: &str = "CMD_MC_SET_DRVALL_SEEKANGLE_GYH";
-const ACTPOS_ALIAS: &str = "CMD_MC_READ_DRVALL_CURANGLE_GYH";
-
-const NONE: Layout = Layout::Fields(&[]);
-
-const fn command(
-    code: u8,
-    name: &'static str,
-    verb: &'static str,
-    request: Layout,
-    response: Layout,
-    alias: Option<&'static str>,
-) -> Command {
-    Command {
-        code,
-        name,
-        verb,
-        request,
-        response,
-        alias,
+impl RunStateValue {
+    /// The value in a reply of `RUN_STATE_SIZE` bytes.
+    pub fn read(&self, data: &[u8]) -> i64 {
+        if self.width == 1 {
+            i64::from(data[self.offset])
+        } else {
+            u16_at(data, self.offset)
+        }
     }
 }
-
-/// A code accepted for compatibility with the vendor's dexterous hand (section 1.2).
-const fn hand(code: u8, name: &'static str, verb: &'static str, reply: Layout) -> Command {
-    Command {
-        code,
-        name,
-        verb,
-        request: Layout::HandValues,
-        response: reply,
-        alias: None,
-    }
-}
-
-pub static COMMANDS: [Command; 19] = [
-    command(
-        cmd::PARA_SAVE,
-        "CMD_MC_PARA_SAVE",
-        "save parameters",
-        NONE,
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::PARA_ID_SET,
-        "CMD_MC_PARA_ID_SET",
-        "set ID",
-        Layout::SetId,
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::MOVE_CATCH_XG,
-        "CMD_MC_MOVE_CATCH_XG",
-        "catch",
-        Layout::Fields(&[SPEED, FORCE]),
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::MOVE_CATCH2_XG,
-        "CMD_MC_MOVE_CATCH2_XG",
-        "continuous catch",
-        Layout::Fields(&[SPEED, FORCE]),
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::MOVE_RELEASE,
-        "CMD_MC_MOVE_RELEASE",
-        "release",
-        Layout::Fields(&[SPEED]),
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::SEEKPOS,
-        "CMD_MC_SEEKPOS",
-        "seek",
-        Layout::Fields(&[SEEK_POSITION]),
-        Layout::Status,
-        Some(SEEK_ALIAS),
-    ),
-    command(
-        cmd::MOVE_STOPHERE,
-        "CMD_MC_MOVE_STOPHERE",
-        "stop",
-        NONE,
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::SET_EG_PARA,
-        "CMD_MC_SET_EG_PARA",
-        "set limits",
-        Layout::Fields(&[LIMIT_MAX, LIMIT_MIN]),
-        Layout::Status,
-        None,
-    ),
-    command(
-        cmd::READ_EG_PARA,
-        "CMD_MC_READ_EG_PARA",
-        "read limits",
-        NONE,
-        Layout::Fields(&[LIMIT_MAX, LIMIT_MIN]),
-        None,
-    ),
-    command(
-        cmd::READ_ACTPOS,
-        "CMD_MC_READ_ACTPOS",
-        "read position",
-        NONE,
-        Layout::Fields(&[ACT_POSITION]),
-        Some(ACTPOS_ALIAS),
-    ),
-    command(
-        cmd::READ_EG_STATE,
-        "CMD_MC_READ_EG_STATE",
-        "read state",
-        NONE,
-        Layout::EgState,
-        None,
-    ),
-    command(
-        cmd::READ_EG_RUNSTATE,
-        "CMD_MC_READ_EG_RUNSTATE",
-        "read run state",
-        NONE,
-        Layout::RunState,
-        None,
-    ),
-    command(
-        cmd::ERROR_CLR,
-        "CMD_MC_ERROR_CLR",
-        "clear faults",
-        NONE,
-        Layout::Status,
-        None,
-    ),
-    hand(
-        cmd::SET_DRVALL_SPEED,
-        "CMD_MC_SET_DRVALL_SPEED",
-        "set speed (hand-compatible)",
-        Layout::HandWriteReply,
-    ),
-    hand(
-        cmd::SET_DRVALL_YBP_THRESHOLD,
-        "CMD_MC_SET_DRVALL_YBP_THRESHOLD",
-        "set force threshold (hand-compatible)",
-        Layout::HandWriteReply,
-    ),
-    hand(
-        cmd::READ_DRVALL_SEEKGYHANGLE,
-        "CMD_MC_READ_DRVALL_SEEKGYHANGLE",
-        "read target position (hand-compatible)",
-        Layout::HandValues,
-    ),
-    hand(
-        cmd::READ_DRVALL_SPEED,
-        "CMD_MC_READ_DRVALL_SPEED",
-        "read speed (hand-compatible)",
-        Layout::HandValues,
-    ),
-    hand(
-        cmd::READ_DRVALL_YBP_THRESHOLD,
-        "CMD_MC_READ_DRVALL_YBP_THRESHOLD",
-        "read force threshold (hand-compatible)",
-        Layout::HandValues,
-    ),
-    hand(
-        cmd::READ_HAND_STATUS,
-        "CMD_MC_READ_HAND_STATUS",
-        "read hand status (hand-compatible)",
-        Layout::HandValues,
-    ),
-];
 
 /// CMD -> index in COMMANDS + 1 (0: no command), built at compile time.
 static BY_CODE: [u8; 256] = {
@@ -473,15 +268,12 @@ impl Payload<'_> {
             // the hand's form of this code carries a list of u16 (section 1.2)
             self.fields.push((key("values"), u16_list(data).0));
         }
-        self.notes.error(
-            F::MALFORMED,
-            format!(
-                "{} {}: expected {expected}, got {}",
-                self.cmd.name,
-                self.direction,
-                data.len()
-            ),
-        );
+        self.notes.error_of(M::serial_layout!(
+            name = self.cmd.name,
+            direction = self.direction,
+            expected = expected,
+            length = data.len()
+        ));
         let head = self.head();
         let s = &mut *self.summary;
         s.push_str(head);
@@ -528,10 +320,12 @@ impl Payload<'_> {
                 }
             }
             if !(f.lo <= v && v <= f.hi) {
-                self.notes.warn(
-                    F::OUT_OF_RANGE,
-                    format!("{} out of range ({}-{}): {v}", f.label, f.lo, f.hi),
-                );
+                self.notes.warn_of(M::value_out_of_range!(
+                    label = f.label,
+                    lo = f.lo,
+                    hi = f.hi,
+                    value = v
+                ));
             }
         }
     }
@@ -546,18 +340,12 @@ impl Payload<'_> {
             self.fields.push((key("status"), Value::from("ok")));
             self.summary.push_str("-> ok");
         } else if b == STATUS_FAILED {
-            self.notes.warn(
-                F::WRITE_FAILED,
-                "write failure status 0x55 (the host should resend)".to_string(),
-            );
+            self.notes.warn_of(M::SERIAL_WRITE_FAILED);
             self.fields.push((key("status"), Value::from("failure")));
             self.summary.push_str("-> FAILED (0x55)");
         } else {
             // a status the manual does not list: not said to have failed, not said to be ok
-            self.notes.warn(
-                F::UNDOCUMENTED,
-                format!("unknown status byte 0x{b:02X} (0x01 is ok, 0x55 failure)"),
-            );
+            self.notes.warn_of(M::serial_unknown_status!(status = b));
             self.fields
                 .push((key("status"), Value::from(format!("unknown 0x{b:02X}"))));
             let _ = write!(self.summary, "-> unknown status 0x{b:02X}");
@@ -573,16 +361,15 @@ impl Payload<'_> {
         };
         let (lo, hi) = ID_RANGE;
         if !(lo <= new_id && new_id <= hi) {
-            self.notes.warn(
-                F::OUT_OF_RANGE,
-                format!("new_id out of range ({lo}-{hi}): {new_id}"),
-            );
+            self.notes.warn_of(M::value_out_of_range!(
+                label = "new_id",
+                lo = lo,
+                hi = hi,
+                value = new_id
+            ));
         }
         if self.device == BROADCAST {
-            self.notes.warn(
-                F::BROADCAST,
-                "set ID sent to broadcast: every gripper on the bus takes the new ID".to_string(),
-            );
+            self.notes.warn_of(M::SERIAL_SET_ID_BROADCAST);
         }
         let _ = write!(self.summary, "set ID {} -> {new_id}", self.device);
         if width == 2 {
@@ -594,22 +381,22 @@ impl Payload<'_> {
 
     /// 0x41 reply: state u8, fault u8, temperature u8, position u16, force setting u16.
     fn run_state(&mut self, data: &[u8]) {
-        if data.len() != 7 {
-            return self.mismatch(&words(7), data);
+        if data.len() != RUN_STATE_SIZE {
+            return self.mismatch(&words(RUN_STATE_SIZE), data);
         }
-        let (state, fault, temp) = (data[0], data[1], data[2] as i64);
-        let (pos, force) = (u16_at(data, 3), u16_at(data, 5));
+        let values = RUN_STATE.map(|v| v.read(data));
+        let [state, fault, temp, pos, force] = values;
         let tb = tables();
         let text: &'static str = &tb.state_text[state as usize];
         let faults: &'static str = &tb.fault_summary[fault as usize];
         let f = &mut *self.fields;
-        f.push((key("state"), Value::Int(state as i64)));
+        f.push((key("state"), Value::Int(state)));
         f.push((key("state_text"), Value::Str(Cow::Borrowed(text))));
-        f.push((key("fault"), Value::Int(fault as i64)));
+        f.push((key("fault"), Value::Int(fault)));
         f.push((
             key("fault_text"),
             Value::List(
-                registers::fault_text(fault as i64)
+                registers::fault_text(fault)
                     .into_iter()
                     .map(|w| Value::Str(Cow::Borrowed(w)))
                     .collect(),
@@ -626,27 +413,22 @@ impl Payload<'_> {
         );
         push_mm_text(s, pos);
         let _ = write!(s, " mm), force setting={force} g");
-        if !(1..=6).contains(&state) {
-            self.notes.warn(
-                F::OUT_OF_RANGE,
-                format!("state out of range (1-6): {state}"),
-            );
-        }
-        if fault != 0 {
-            self.notes
-                .warn(F::DEVICE_FAULT, format!("gripper reports fault: {faults}"));
-        }
-        if !(0..=1000).contains(&pos) {
-            self.notes.warn(
-                F::OUT_OF_RANGE,
-                format!("position out of range (0-1000): {pos}"),
-            );
-        }
-        if !(50..=1000).contains(&force) {
-            self.notes.warn(
-                F::OUT_OF_RANGE,
-                format!("force setting out of range (50-1000): {force}"),
-            );
+        for (spec, value) in RUN_STATE.iter().zip(values) {
+            if spec.key == "fault" {
+                // fault bits, not a range
+                if value != 0 {
+                    self.notes.warn_of(M::serial_device_fault!(faults = faults));
+                }
+            } else if let (Some(lo), Some(hi)) = (spec.lo, spec.hi) {
+                if !(lo..=hi).contains(&value) {
+                    self.notes.warn_of(M::value_out_of_range!(
+                        label = spec.label,
+                        lo = lo,
+                        hi = hi,
+                        value = value
+                    ));
+                }
+            }
         }
     }
 
@@ -817,6 +599,7 @@ fn decode(raw: &[u8]) -> Entry {
 
 /// The entry of bytes that do not fit a header and its length byte (`_malformed`).
 fn malformed(raw: &[u8]) -> Entry {
+    let (flag, error) = M::serial_frame_shape!(length = raw.len());
     Entry {
         direction: None,
         device: None,
@@ -824,15 +607,12 @@ fn malformed(raw: &[u8]) -> Entry {
         name: None,
         fields: vec![(key("data"), Value::Str(Cow::Owned(hex(raw))))].into(),
         summary: Text::from("malformed frame"),
-        errors: vec![format!(
-            "malformed frame: {} bytes do not fit a header and its length byte",
-            raw.len()
-        )],
+        errors: vec![error],
         warnings: Vec::new(),
         pair_key: None,
         expects: false,
         save: false,
-        flags: vec![F::MALFORMED],
+        flags: vec![flag],
     }
 }
 
@@ -842,18 +622,12 @@ fn note_header(raw: &[u8], direction: &str, notes: &mut Notes) {
     let device = raw[2];
     let (expected, got) = (checksum(&raw[2..n - 1]), raw[n - 1]);
     if expected != got {
-        notes.error(
-            F::BAD_CHECKSUM,
-            format!("checksum error: expected 0x{expected:02X}, got 0x{got:02X}"),
-        );
+        notes.error_of(M::serial_checksum!(expected = expected, got = got));
     }
     if device == 0 {
-        notes.warn(F::INVALID_ID, "ID 0 is not a valid ID".to_string());
+        notes.warn_of(M::SERIAL_ID_ZERO);
     } else if device == BROADCAST && direction == RESPONSE {
-        notes.warn(
-            F::BROADCAST,
-            "response from broadcast ID 255 (broadcasts get no response)".to_string(),
-        );
+        notes.warn_of(M::SERIAL_BROADCAST_RESPONSE);
     }
 }
 
@@ -864,10 +638,7 @@ fn unknown(code: u8, data: &[u8], fields: &mut Fields, summary: &mut String, not
         summary.push_str(": ");
         push_hex(summary, data);
     }
-    notes.warn(
-        F::UNDOCUMENTED,
-        format!("unknown command 0x{code:02X} (in neither the gripper's nor the hand's table)"),
-    );
+    notes.warn_of(M::serial_unknown_command!(code = code));
     fields.push((key("data"), Value::Str(Cow::Owned(hex(data)))));
 }
 

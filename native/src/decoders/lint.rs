@@ -12,8 +12,7 @@ use crate::decoders::pairing::StreamIds;
 use crate::hash::FastMap;
 use crate::pyfloat::py_fixed;
 
-pub const MIN_GAP_S: f64 = 0.005;
-pub const AFTER_SAVE_S: f64 = 1.0;
+pub use crate::generated::lint::{AFTER_SAVE_S, MIN_GAP_S};
 
 /// (bus and protocol, device) as the Python key `(rec.bus, rec.protocol, rec.device)`.
 type Key = (u32, Option<i64>);

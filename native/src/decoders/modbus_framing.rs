@@ -11,30 +11,10 @@ use crate::decoders::model::RESPONSE;
 use crate::decoders::framing::Stream;
 pub use crate::decoders::framing::NEED_MORE;
 
-// function codes, as sent in requests (an exception response sets bit 7)
-pub const READ_COILS: u8 = 0x01;
-pub const READ_DISCRETE: u8 = 0x02;
-pub const READ_HOLDING: u8 = 0x03;
-pub const READ_INPUT: u8 = 0x04;
-pub const WRITE_COIL: u8 = 0x05;
-pub const WRITE_SINGLE: u8 = 0x06;
-pub const WRITE_COILS: u8 = 0x0F;
-pub const WRITE_MULTIPLE: u8 = 0x10;
-
-/// `FUNCTION_TEXT`: the words for a (request) function code we frame.
-pub fn function_text(fc: u8) -> Option<&'static str> {
-    Some(match fc {
-        READ_COILS => "read coils",
-        READ_DISCRETE => "read discrete inputs",
-        READ_HOLDING => "read holding registers",
-        READ_INPUT => "read input registers",
-        WRITE_COIL => "write single coil",
-        WRITE_SINGLE => "write single register",
-        WRITE_COILS => "write multiple coils",
-        WRITE_MULTIPLE => "write multiple registers",
-        _ => return None,
-    })
-}
+pub use crate::generated::modbus::{
+    function_text, READ_COILS, READ_DISCRETE, READ_HOLDING, READ_INPUT, WRITE_COIL, WRITE_COILS,
+    WRITE_MULTIPLE, WRITE_SINGLE,
+};
 
 // what a function code byte announces: 0 nothing we frame, else one of these shapes
 pub const KIND_READ: u8 = 1;

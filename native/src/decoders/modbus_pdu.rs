@@ -24,38 +24,17 @@ pub const CRC_SWAPPED: &str = "CRC byte order swapped (high byte first)";
 pub const NO_REQUEST: &str = "read response without a known request: registers unknown";
 pub const UNTRUSTED: &str = "registers named from a request with a CRC error";
 
+use crate::generated::modbus::{exception_text, BROADCAST};
+
 /// `FUNCTION_NAME`: the record name of the functions that address no EG2 register.
 fn function_name(fc: u8) -> &'static str {
-    match fc {
-        READ_COILS => "READ_COILS",
-        READ_DISCRETE => "READ_DISCRETE_INPUTS",
-        WRITE_COIL => "WRITE_SINGLE_COIL",
-        WRITE_COILS => "WRITE_MULTIPLE_COILS",
-        _ => unreachable!("function_name of function {fc}"),
-    }
-}
-
-/// `EXCEPTION_TEXT`
-fn exception_text(code: u8) -> Option<&'static str> {
-    Some(match code {
-        1 => "illegal function",
-        2 => "illegal data address",
-        3 => "illegal data value",
-        4 => "server device failure",
-        5 => "acknowledge",
-        6 => "server device busy",
-        8 => "memory parity error",
-        10 => "gateway path unavailable",
-        11 => "gateway target device failed to respond",
-        _ => return None,
-    })
+    crate::generated::modbus::function_name(fc)
+        .unwrap_or_else(|| unreachable!("function_name of function {fc}"))
 }
 
 fn is_eg2_function(fc: u8) -> bool {
     matches!(fc, READ_HOLDING | WRITE_SINGLE | WRITE_MULTIPLE)
 }
-
-pub const BROADCAST: u8 = 0;
 
 /// Enough for the summary of a 5-register poll response: one allocation, no regrowth.
 const SUMMARY_CAPACITY: usize = 160;

@@ -10,19 +10,10 @@ use std::sync::{Arc, OnceLock};
 /// A string that is usually a literal from the register/command tables.
 pub type Str = Cow<'static, str>;
 
-pub const EG2_SERIAL: &str = "eg2-serial";
-pub const MODBUS_RTU: &str = "modbus-rtu";
-pub const EG2_CAN: &str = "eg2-can";
-pub const FOREIGN_CAN: &str = "can";
-
-pub const FRAME: &str = "frame";
-pub const GARBAGE: &str = "garbage";
-pub const TRUNCATED: &str = "truncated";
-/// the bytes of a frame begun when the capture was stopped (the Python's live byte streams)
-pub const CUT_OFF: &str = "cut_off";
-
-pub const REQUEST: &str = "request";
-pub const RESPONSE: &str = "response";
+pub use crate::generated::model::{
+    CUT_OFF, EG2_CAN, EG2_SERIAL, FOREIGN_CAN, FRAME, GARBAGE, MODBUS_RTU, REQUEST, RESPONSE,
+    TRUNCATED,
+};
 
 /// A value in `Record.fields`, in the order and with the types the Python decoders produce
 /// (int stays int, float stays float: the JSON text differs).
@@ -334,6 +325,14 @@ impl Notes {
     pub fn warn(&mut self, code: &'static str, text: String) {
         self.warnings.push(text);
         self.flag(code);
+    }
+    /// An error in a catalogue's words (`generated::messages`): (its code, its text).
+    pub fn error_of(&mut self, (code, text): (&'static str, impl Into<String>)) {
+        self.error(code, text.into());
+    }
+    /// A warning in a catalogue's words (`generated::messages`): (its code, its text).
+    pub fn warn_of(&mut self, (code, text): (&'static str, impl Into<String>)) {
+        self.warn(code, text.into());
     }
     pub fn flag(&mut self, code: &'static str) {
         if !self.flags.contains(&code) {

@@ -5,67 +5,24 @@
 //! `CAN address = 1000 + 2 * (register - 1000)` (section 3.1). Run-state and fault-bit texts
 //! (section 1.3) live here too: all three protocols use them.
 //!
-//! The table is a static array of `Register`s; placeholders for registers the manual does not
+//! The table is a static array of `Register`s (written from the Python's by
+//! `native/codegen.py`, in `generated.rs`); placeholders for registers the manual does not
 //! describe are built on demand (their names are formatted), so lookups hand out
 //! `Cow<'static, Register>`: borrowed from the table in the usual case.
 
 use std::borrow::Cow;
 
 use crate::decoders::model::Str;
+use crate::generated::messages::value_out_of_range;
 use crate::pyfloat::{push_py_repr, py_round};
 
-/// 1000 = 70 mm (section 0)
-pub const STROKE_MM: f64 = 70.0;
-
-/// First and last register of the map (Modbus numbering).
-pub const FIRST: i64 = 1001;
-pub const LAST: i64 = 1065;
-
-/// Writes of 1 to these make the gripper pause ~850 ms (SAVE_REGISTERS).
-pub const SAVE_REGISTERS: [i64; 2] = [1001, 1002];
+pub use crate::generated::registers::{
+    FAULT_BITS, FAULT_BIT_WORDS, FIRST, LAST, REGISTERS, SAVE_REGISTERS, STATE_TEXT, STROKE_MM,
+};
 
 pub fn is_save_register(number: i64) -> bool {
     SAVE_REGISTERS.contains(&number)
 }
-
-/// STATE_TEXT, indexed by state - 1.
-pub const STATE_TEXT: [&str; 6] = [
-    "fully open, idle",
-    "fully closed, idle",
-    "stopped, idle",
-    "closing",
-    "opening",
-    "stopped by the force limit while closing",
-];
-
-pub const FAULT_BITS: [&str; 5] = [
-    "stall",
-    "over-temperature",
-    "over-current",
-    "driver fault",
-    "internal communication fault",
-];
-
-/// The word for each of the 16 bits `fault_text` names (FAULT_BITS, then reserved bits 5-7,
-/// then plain bits 8-15): every text is a literal, so `fault_text` allocates only the list.
-const BIT_WORDS: [&str; 16] = [
-    "stall",
-    "over-temperature",
-    "over-current",
-    "driver fault",
-    "internal communication fault",
-    "reserved bit 5",
-    "reserved bit 6",
-    "reserved bit 7",
-    "bit 8",
-    "bit 9",
-    "bit 10",
-    "bit 11",
-    "bit 12",
-    "bit 13",
-    "bit 14",
-    "bit 15",
-];
 
 /// Opening 0-1000 to millimetres (linear; 1000 = 70 mm): `round(value * 70.0 / 1000.0, 2)`.
 pub fn opening_mm(value: i64) -> f64 {
@@ -89,7 +46,7 @@ pub fn fault_text(bits: i64) -> Vec<&'static str> {
     }
     (0..16)
         .filter(|i| bits & (1 << i) != 0)
-        .map(|i| BIT_WORDS[i])
+        .map(|i| FAULT_BIT_WORDS[i])
         .collect()
 }
 
@@ -148,7 +105,9 @@ impl Register {
     pub fn range_warning(&self, value: i64) -> Option<String> {
         match (self.lo, self.hi) {
             (Some(lo), Some(hi)) if !(lo <= value && value <= hi) => {
-                Some(format!("{} out of range ({lo}-{hi}): {value}", self.key))
+                let (_, text) =
+                    value_out_of_range!(label = self.key, lo = lo, hi = hi, value = value);
+                Some(text)
             }
             _ => None,
         }
@@ -187,7 +146,7 @@ impl Register {
 /// A documented register of the table (all strings literals); one positional row per
 /// register keeps the table as readable as the Python one.
 #[allow(clippy::too_many_arguments)]
-const fn reg(
+pub(crate) const fn reg(
     number: i64,
     name: &'static str,
     key: &'static str,
@@ -214,30 +173,6 @@ const fn reg(
         documented: true,
     }
 }
-
-/// The map, sorted by number (lookups binary-search it). Unit "mm" means the value is 0-1000
-/// of the stroke and is also shown in millimetres.
-#[rustfmt::skip]
-pub static REGISTERS: [Register; 18] = [
-    reg(1001, "CMD_SAVE", "save", "rw", Some((0, 1)), "", false, "1 = save parameters to flash"),
-    reg(1002, "CMD_SETDEFAULT", "set_default", "rw", Some((0, 1)), "", false, "1 = restore factory"),
-    reg(1003, "CMD_ID", "id", "rw", Some((0, 254)), "", false, "device ID"),
-    reg(1004, "CMD_BAUD", "baud", "rw", Some((0, 2)), "", false, "0 = 115200, 1 = 57600, 2 = 19200"),
-    reg(1005, "CMD_CATCH_MOD", "catch_mode", "rw", Some((0, 1)), "", false, "0 single, 1 continuous"),
-    reg(1006, "CMD_STOP", "stop", "rw", Some((0, 1)), "", false, "1 = stop"),
-    reg(1007, "CMD_FAULTACK", "fault_clear", "rw", Some((0, 1)), "", false, "1 = clear faults"),
-    reg(1010, "CMD_OPENLEN_SET", "target_opening", "rw", Some((0, 1000)), "mm", false, "target"),
-    reg(1011, "CMD_SPEED_SET", "speed", "rw", Some((10, 1000)), "", false, "speed"),
-    reg(1012, "CMD_FORCE_SET", "force", "rw", Some((100, 1000)), "g", false, "grip force"),
-    reg(1016, "CMD_MAX_OPENLEN", "max_opening", "rw", Some((0, 1000)), "mm", false, "upper limit"),
-    reg(1017, "CMD_MIN_OPENLEN", "min_opening", "rw", Some((0, 1000)), "mm", false, "lower limit"),
-    reg(1060, "CMD_FORCE_ACT", "measured_force", "ro", None, "", false, "measured force"),
-    reg(1061, "CMD_OPENLEN_ACT", "measured_opening", "ro", Some((0, 1000)), "mm", false, "opening"),
-    reg(1062, "CMD_CURRENT", "current", "ro", Some((-2000, 2000)), "", true, "current"),
-    reg(1063, "CMD_TEMP", "temperature_c", "ro", Some((0, 100)), "°C", false, "temperature"),
-    reg(1064, "CMD_ERRORCODE", "fault", "ro", Some((0, 0x1F)), "", false, "fault bits"),
-    reg(1065, "CMD_STATUS", "state", "ro", Some((1, 6)), "", false, "run state"),
-];
 
 /// A register, borrowed from the table or an owned placeholder.
 pub type RegRef = Cow<'static, Register>;

@@ -8,20 +8,10 @@
 use crate::decoders::eg2_serial::Eg2SerialDecoder;
 use crate::decoders::framing::StreamDecoder;
 use crate::decoders::modbus_rtu::ModbusRtuDecoder;
-use crate::decoders::model::{Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
+use crate::decoders::model::{Record, EG2_SERIAL, MODBUS_RTU};
 use std::sync::Arc;
 
-/// registry.py `ALIASES`: a protocol name or alias (lower case) to its canonical name.
-pub const ALIASES: [(&str, &str); 8] = [
-    ("serial", EG2_SERIAL),
-    ("eg2-serial", EG2_SERIAL),
-    ("rs232", EG2_SERIAL),
-    ("modbus", MODBUS_RTU),
-    ("modbus-rtu", MODBUS_RTU),
-    ("rs485", MODBUS_RTU),
-    ("can", EG2_CAN),
-    ("eg2-can", EG2_CAN),
-];
+pub use crate::generated::registry::ALIASES;
 
 /// registry.py `resolve_protocol`: the canonical name of a protocol name or alias (any case),
 /// or the Python ValueError's text listing the choices.

@@ -13,7 +13,7 @@
 
 use std::sync::{Arc, OnceLock};
 
-use crate::decoders::eg2_serial::cmd;
+use crate::decoders::eg2_serial::{cmd, RUN_STATE};
 use crate::decoders::flags::{OUT_OF_RANGE, UNANSWERED};
 use crate::decoders::model::{Fields, Record, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE};
 use crate::decoders::registers::{by_name, fault_text, opening_mm, state_text, STROKE_MM};
@@ -21,82 +21,11 @@ use crate::hash::FastMap;
 use crate::json::{push_int, push_str, push_value};
 use crate::pyfloat::{push_json_float, push_py_repr, py_round};
 
-/// The state fields, in the order they are shown and recorded (READINGS, SETTINGS,
-/// last_command, latency_ms, COUNTERS).
-pub const VALUE_KEYS: [&str; 17] = [
-    "opening",
-    "force",
-    "current",
-    "temperature_c",
-    "state",
-    "fault",
-    "target_opening",
-    "speed",
-    "force_setting",
-    "catch_mode",
-    "max_opening",
-    "min_opening",
-    "last_command",
-    "latency_ms",
-    "frames",
-    "errors",
-    "unanswered",
-];
-
-/// `,"key":` of each VALUE_KEYS key, the JSON between two values (one copy instead of three).
-const KEY_JSON: [&str; 17] = [
-    ",\"opening\":",
-    ",\"force\":",
-    ",\"current\":",
-    ",\"temperature_c\":",
-    ",\"state\":",
-    ",\"fault\":",
-    ",\"target_opening\":",
-    ",\"speed\":",
-    ",\"force_setting\":",
-    ",\"catch_mode\":",
-    ",\"max_opening\":",
-    ",\"min_opening\":",
-    ",\"last_command\":",
-    ",\"latency_ms\":",
-    ",\"frames\":",
-    ",\"errors\":",
-    ",\"unanswered\":",
-];
-
-// indexes into VALUE_KEYS (and `Values::slots` for the first SLOTS of them)
-pub const OPENING: usize = 0;
-pub const FORCE: usize = 1;
-pub const CURRENT: usize = 2;
-pub const TEMPERATURE_C: usize = 3;
-pub const STATE: usize = 4;
-pub const FAULT: usize = 5;
-pub const TARGET_OPENING: usize = 6;
-pub const SPEED: usize = 7;
-pub const FORCE_SETTING: usize = 8;
-pub const CATCH_MODE: usize = 9;
-pub const MAX_OPENING: usize = 10;
-pub const MIN_OPENING: usize = 11;
-pub const LAST_COMMAND: usize = 12;
-pub const LATENCY_MS: usize = 13;
-/// The fields a record can set; the three counters follow them in `VALUE_KEYS`.
-pub const SLOTS: usize = 14;
-
-/// REGISTER_FIELDS: register name -> state field.
-pub const REGISTER_FIELDS: [(&str, usize); 12] = [
-    ("CMD_OPENLEN_SET", TARGET_OPENING),
-    ("CMD_SPEED_SET", SPEED),
-    ("CMD_FORCE_SET", FORCE_SETTING),
-    ("CMD_CATCH_MOD", CATCH_MODE),
-    ("CMD_MAX_OPENLEN", MAX_OPENING),
-    ("CMD_MIN_OPENLEN", MIN_OPENING),
-    ("CMD_FORCE_ACT", FORCE),
-    ("CMD_OPENLEN_ACT", OPENING),
-    ("CMD_CURRENT", CURRENT),
-    ("CMD_TEMP", TEMPERATURE_C),
-    ("CMD_ERRORCODE", FAULT),
-    ("CMD_STATUS", STATE),
-];
+pub use crate::generated::tracker::{
+    CATCH_MODE, CURRENT, FAULT, FORCE, FORCE_SETTING, KEY_JSON, LAST_COMMAND, LATENCY_MS,
+    MAX_OPENING, MIN_OPENING, OPENING, REGISTER_FIELDS, SLOTS, SPEED, STATE, TARGET_OPENING,
+    TEMPERATURE_C, VALUE_KEYS,
+};
 
 /// One state value. The Python values are whatever the decoder put in `fields` (ints for every
 /// register and serial field), the summary text, a latency or None; `Text` shares a record's
@@ -517,14 +446,8 @@ fn serial(rec: &Record, request: bool, fold: &mut Fold<'_>) {
             cmd::READ_EG_PARA => limits(fold, &get_or_null),
             cmd::READ_ACTPOS => if_present(fold, "position", OPENING),
             cmd::READ_EG_RUNSTATE => {
-                for (key, field) in [
-                    ("state", STATE),
-                    ("fault", FAULT),
-                    ("temperature_c", TEMPERATURE_C),
-                    ("position", OPENING),
-                    ("force_setting_g", FORCE_SETTING),
-                ] {
-                    if_present(fold, key, field);
+                for value in RUN_STATE {
+                    if_present(fold, value.key, value.state);
                 }
             }
             cmd::READ_EG_STATE => {

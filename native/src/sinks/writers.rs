@@ -323,29 +323,7 @@ impl RecordWriter for JsonlWriter {
 // ---------------------------------------------------------------------------------------------
 // CSV (analyzer/sinks/csv.py)
 
-/// The columns of csv.py `COLUMNS`, in order.
-pub const CSV_COLUMNS: [&str; 20] = [
-    "seq",
-    "t",
-    "bus",
-    "protocol",
-    "kind",
-    "offset",
-    "index",
-    "length",
-    "direction",
-    "device",
-    "code",
-    "name",
-    "summary",
-    "fields",
-    "raw",
-    "errors",
-    "warnings",
-    "flags",
-    "pair",
-    "latency_ms",
-];
+pub use crate::generated::csv::CSV_COLUMNS;
 
 /// One cell as `csv.writer` (excel dialect, QUOTE_MINIMAL) writes it: quoted when it holds the
 /// delimiter, the quote character or a character of the line terminator (`\r`, `\n`), with
