@@ -257,7 +257,7 @@ type Cands = ([i64; 2], usize);
 
 /// Does the close reading of length second hold its CRC too, beside the one ending at end?
 /// None when that needs more bytes (`_close_reading_holds`).
-#[inline]
+#[inline(always)]
 fn close_reading_holds(
     buf: &[u8],
     pos: usize,
@@ -361,6 +361,7 @@ impl ModbusFramer {
     }
 
     /// frame_at for a function with one frame length in either direction (`_one_shape_at`).
+    #[inline(always)] // once per write-single or exception frame
     fn one_shape_at<C: FrameContext + ?Sized>(
         &mut self,
         ctx: &C,
@@ -387,7 +388,7 @@ impl ModbusFramer {
 
     /// The two candidate lengths, preferred first, as candidates() orders them (inlined as
     /// the Python does); second == 0: none, -1: its length is not known yet (`_two_readings`).
-    #[inline]
+    #[inline(always)] // once per frame: it was written inline in frame_at
     fn two_readings(
         &self,
         buf: &[u8],
@@ -434,7 +435,7 @@ impl ModbusFramer {
     /// to collide (see decide) or that reading fails its CRC; a known direction settles the
     /// reading by itself. None when this does not settle it (`_expected_reading`).
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)] // once per frame: it was written inline in frame_at
     fn expected_reading<C: FrameContext + ?Sized>(
         &mut self,
         ctx: &C,
