@@ -99,3 +99,31 @@ def test_plot_takes_the_captures_decode_reads() -> None:
     assert plot.help is not None and decode.help is not None
     assert plot.help.startswith(decode.help)
     assert "PCAN trace (.trc, 1.0-2.1)" in plot.help and "candump -L" not in plot.help
+
+
+def test_a_command_imports_only_its_own_module() -> None:
+    """``eg2scope decode`` builds the parser of decode alone (the TUI, the simulator, Rerun are
+    not imported); ``eg2scope --help`` and an unknown command still list every command."""
+    script = (
+        "import sys; from analyzer import cli; "
+        "code = cli.main(sys.argv[1:]); "
+        "print(sorted(m for m in sys.modules if m.startswith('analyzer.commands.')), "
+        "file=sys.stderr); sys.exit(code)"
+    )
+    capture = str(ROOT / "captures" / "can_pick_place.log")
+    proc = subprocess.run(
+        [sys.executable, "-c", script, "decode", "-f", "jsonl", capture],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert proc.returncode == 0, proc.stderr
+    loaded = proc.stderr.strip().splitlines()[-1]
+    assert "analyzer.commands.decode" in loaded
+    for other in ("tui", "sim", "demo", "plot", "batch"):
+        assert f"analyzer.commands.{other}'" not in loaded, loaded
+    wrong = subprocess.run(
+        [sys.executable, "-m", "analyzer", "decod"], capture_output=True, text=True, cwd=ROOT
+    )
+    assert wrong.returncode == 2
+    assert all(name in wrong.stderr for name in SUBCOMMANDS), wrong.stderr
