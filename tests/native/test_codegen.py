@@ -60,8 +60,8 @@ def test_missing_file_is_stale(tmp_path: Path) -> None:
 def test_tables_come_from_the_python() -> None:
     """A spot check of each kind of fact: flag codes, registers, serial commands and layouts,
     state keys, CSV columns."""
+    from analyzer.session.tracker import VALUE_KEYS
     from analyzer.sinks.csv import COLUMNS
-    from analyzer.tracker import VALUE_KEYS
     from decoders import flags
     from decoders.eg2_serial import COMMANDS, RUN_STATE
     from decoders.registers import REGISTERS
