@@ -28,7 +28,7 @@ mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the 
 #[path = "python_live.rs"]
 mod python_live; // LiveCan, RecordBatch, can_raw_messages: the live CAN path (helper L)
 #[path = "python_rerun.rs"]
-mod python_rerun; // rerun_log_rows: what a plot's logs show of a RecordBatch
+mod python_rerun; // RecordBatch.rerun_log_rows: what a plot's logs show of a RecordBatch
 #[path = "python_tracker.rs"]
 mod python_tracker; // Tracker, SampleBatch: the live state tracker (helper K)
 
@@ -397,7 +397,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     python_frames::register(m)?;
     python_live::register(m)?;
     python_tracker::register(m)?;
-    python_rerun::register(m)?;
     m.add("Unsupported", m.py().get_type::<Unsupported>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("FORMATS", ("jsonl", "csv", "text"))?;

@@ -428,7 +428,7 @@ impl SampleBatch {
         }
     }
 
-    /// `analyzer.batches.sample_series(list(batch), fields)`, read from the samples (no
+    /// `analyzer.batches.SampleSequence(batch).series(fields)`, read from the samples (no
     /// StateSample is made): the samples that changed any of `fields`, grouped by (bus,
     /// device, names), `names` the fields among `fields` the sample changed, in `fields` order
     /// (a field given twice is named and filled twice, as there); per group
