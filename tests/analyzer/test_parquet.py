@@ -28,7 +28,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from protocol_vectors import load
 
-from analyzer.batches import records_jsonl
+from analyzer.batches import RecordSequence
 from analyzer.model import Item, SourceEvent
 from analyzer.parquet_schema import FAMILY, RECORD_COLUMNS, SCHEMA
 from analyzer.pipeline import Decoding
@@ -202,7 +202,7 @@ def _rest(f: CanFrame) -> tuple[Any, ...]:
 def decoded_jsonl(items: list[Item], protocol: str | None = None) -> bytes:
     """The Python engine's JSONL of items (Decoding with pairing and lint)."""
     records = list(Decoding(protocol=protocol, positional_seq=True).feed_many(items))
-    return records_jsonl(records)
+    return RecordSequence(records).jsonl()
 
 
 def byte_items(data: bytes, bus: str = "serial") -> list[Item]:

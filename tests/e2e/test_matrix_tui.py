@@ -16,7 +16,7 @@ from e2e_checks import force_session_engine, seq_names, skip_unless_native
 from e2e_inputs import CAN_IDS, IDS
 from textual.worker import Worker, WorkerState
 
-from analyzer.batches import record_messages
+from analyzer.batches import RecordSequence
 from analyzer.cli import build_parser
 from analyzer.commands.tui import capture_plan
 from analyzer.session import Session
@@ -31,8 +31,8 @@ def stored_by_bus(app: Eg2ScopeApp) -> dict[str, list[dict[str, Any]]]:
     """The store's records as their JSONL objects, per bus, in the store's order."""
     store = app.store
     buses: dict[str, list[dict[str, Any]]] = {}
-    records = list(store.records(range(store.count)))
-    for record, line in zip(records, record_messages(records), strict=True):
+    records = RecordSequence(store.records(range(store.count)))
+    for record, line in zip(records, records.messages(), strict=True):
         buses.setdefault(record.bus, []).append(orjson.loads(line))
     return buses
 

@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 from mcap.records import ChunkIndex, Message
 from mcap_checks import assert_time_ordered
 
+from analyzer.batches import RecordSequence
 from analyzer.model import INFO, Item, SourceEvent
 from analyzer.recording import (
     McapCaptureReader,
@@ -61,7 +62,7 @@ def write(rec: McapRecorder, items: list[Item]) -> None:
         rec.on_raw(part)
         if k % 40 == 0:
             t = part[0].payload.t or 0
-            rec.on_records([note(k, t)])
+            rec.on_records(RecordSequence([note(k, t)]))
             rec.on_event(SourceEvent(t, "can0", INFO, f"e{k}", "info"))
         rec.tick(0.0)
 

@@ -13,6 +13,7 @@ from mcap.reader import make_reader
 from mcap_checks import assert_time_ordered, mcap_messages
 
 from analyzer import __version__, recording
+from analyzer.batches import RecordSequence, SampleSequence
 from analyzer.errors import UsageError
 from analyzer.listener import Listener, make_listener
 from analyzer.model import ERROR, INFO, WARNING, Item, SourceEvent, StateSample
@@ -117,8 +118,8 @@ def recorded(tmp_path: Path) -> Path:
     path = tmp_path / "run.mcap"
     with McapRecorder(path, META) as rec:
         rec.on_raw(sample_items())
-        rec.on_records(sample_records())
-        rec.on_states(sample_states())
+        rec.on_records(RecordSequence(sample_records()))
+        rec.on_states(SampleSequence(sample_states()))
         rec.on_event(SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops"))
         rec.on_event(SourceEvent(T0 + 0.03, "ttyUSB0", INFO, "port reopened", "reopened", 7))
         rec.write_mark(T0 + 0.04, "gripper slipped", 11)
@@ -370,8 +371,8 @@ def test_closed_recorder_refuses_writes(tmp_path: Path) -> None:
     rec.close()  # twice is fine
     for call in (
         lambda: rec.on_raw(sample_items()),
-        lambda: rec.on_records(sample_records()),
-        lambda: rec.on_states(sample_states()),
+        lambda: rec.on_records(RecordSequence(sample_records())),
+        lambda: rec.on_states(SampleSequence(sample_states())),
         lambda: rec.on_event(SourceEvent(T0, "can0", INFO, "x")),
         lambda: rec.write_mark(T0, "x"),
     ):
