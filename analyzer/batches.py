@@ -32,9 +32,9 @@ from .tracker import Tracker
 
 
 class SessionDecoding(Protocol):
-    """What a session asks of its decoding (``pipeline.Decoding`` or the native ``LiveCan``).
-    The native core answers with ``RecordBatch``es, which behave as these lists do where the
-    session uses them (``len``, iteration, indexing, ``+=`` of another)."""
+    """What a session asks of its decoding (``PythonDecoding`` or ``NativeCanDecoding``): records
+    as ``RecordSequence``s, or as the native core's ``RecordBatch``es, which behave alike where
+    the session uses them (``len``, iteration, indexing, ``+=`` of another, the bulk methods)."""
 
     def feed_items(self, items: list[Any]) -> RecordSequence: ...
     def tick(self, now: float) -> RecordSequence: ...
@@ -46,7 +46,8 @@ class SessionDecoding(Protocol):
 
 
 def native_session_available() -> bool:
-    """The native core is built and has the session classes."""
+    """The native core is built (then it is complete: tests/native_core.py lists what the
+    product calls on it)."""
     return _native is not None
 
 
