@@ -113,6 +113,7 @@ def native_arrow_available() -> bool:
 
 
 def child_listener(capture: Path, protocol: str, out: Path) -> dict[str, float]:
+    from analyzer.batches import RecordSequence
     from analyzer.model import Item
     from analyzer.pipeline import Decoding
     from analyzer.sinks.parquet import ParquetListener
@@ -125,8 +126,9 @@ def child_listener(capture: Path, protocol: str, out: Path) -> dict[str, float]:
     with out.open("wb") as f:
         listener = ParquetListener(f)
 
-        def give(records: list) -> None:
+        def give(batch: list) -> None:
             nonlocal spent, cpu, rows
+            records = RecordSequence(batch)  # what a session hands its listeners
             start, cpu0 = time.perf_counter(), time.process_time()
             listener.on_records(records)
             spent += time.perf_counter() - start
