@@ -26,14 +26,17 @@ CORE_API = (
     "Tracker",
     "RecordBatch.column",
     "RecordBatch.error_count",
+    "RecordBatch.jsonl",
     "RecordBatch.messages",
     "RecordBatch.problems",
+    "RecordBatch.rerun_log_rows",
+    "RecordBatch.take",
+    "SampleBatch.arrow",
     "SampleBatch.column",
     "SampleBatch.keys",
     "SampleBatch.messages",
     "SampleBatch.series",
     "can_raw_messages",
-    "rerun_log_rows",
 )
 
 

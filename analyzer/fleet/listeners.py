@@ -6,20 +6,20 @@ parquet`` takes, samples as objects or a native ``SampleBatch``)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import pyarrow as pa
 
-from decoders.model import Record
-
-from ..model import StateSample
 from ..parquet.writer import JsonlTables
-from ..session.batches import records_jsonl
 from ..session.listener import Listener
 from . import layout
 from .partitions import PartitionFiles
 from .summary import RecordSummary
 from .tables import RECORDS_SCHEMA, STATES_SCHEMA, state_rows, states_table, with_source
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence, SampleSequence
 
 #: how far a capture has got: (bytes of the file read, records decoded)
 Progress = Callable[[int, int], None]
@@ -40,7 +40,7 @@ class CaptureTables(JsonlTables):
         self.summary.add(table)
         self.files.add(layout.RECORDS, RECORDS_SCHEMA, self._sourced(table))
 
-    def add_states(self, samples: Sequence[StateSample] | pa.Table) -> None:
+    def add_states(self, samples: SampleSequence | pa.Table) -> None:
         """State samples: objects, a native ``SampleBatch``, or a table of ``STATE_COLUMNS``."""
         rows = state_rows(samples) if isinstance(samples, pa.Table) else states_table(samples)
         self.files.add(layout.STATES, STATES_SCHEMA, self._sourced(rows))
@@ -61,10 +61,10 @@ class SessionTables(Listener):
         self.tables = tables
         self.label = "fleet dataset"
 
-    def on_records(self, records: Sequence[Record]) -> None:
-        self.tables.write_jsonl(records_jsonl(records))
+    def on_records(self, records: RecordSequence) -> None:
+        self.tables.write_jsonl(records.jsonl())
 
-    def on_states(self, samples: Sequence[StateSample]) -> None:
+    def on_states(self, samples: SampleSequence) -> None:
         self.tables.add_states(samples)
 
     def close(self) -> None:
@@ -85,7 +85,7 @@ class Checkpoint(Listener):
         self.records = 0
         self.label = "fleet progress"
 
-    def on_records(self, records: Sequence[Record]) -> None:
+    def on_records(self, records: RecordSequence) -> None:
         self.records += len(records)
 
     def tick(self, now: float) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any, Final
 
 import numpy as np
@@ -18,12 +18,10 @@ import pyarrow.compute as pc
 
 from decoders.registers import fault_text, state_text
 
-from ..model import StateSample
 from ..parquet import native as native_parquet
 from ..parquet.schema import SCHEMA as RECORD_SCHEMA
 from ..parquet.schema import described_field, millimetres
-from ..session.batches import SampleBatch
-from ..session.tracker import VALUE_KEYS
+from ..session.batches import SampleSequence
 from ..sources.candump import RELATIVE_LIMIT
 
 BUS: Final = "bus"
@@ -195,25 +193,12 @@ def _days(t: pa.ChunkedArray | pa.Array, fallback: str) -> pa.Array | pa.Chunked
     return pc.fill_null(text, fallback)
 
 
-def states_table(samples: Sequence[StateSample]) -> pa.Table:
+def states_table(samples: SampleSequence) -> pa.Table:
     """State samples as rows, the fields of ``StateSample.to_dict()`` (``bus`` kept, for
-    partitioning; the source columns not yet). A native ``SampleBatch`` fills the columns
-    itself (no object per sample); a list is read column by column."""
-    if isinstance(samples, SampleBatch):
-        _rows, parts = samples.arrow(native_parquet.columns(STATE_COLUMNS))
-        return state_rows(native_parquet.batch_table(parts, STATE_COLUMNS))
-    values = [s.values for s in samples]
-    columns: dict[str, Any] = {
-        BUS: [s.bus for s in samples],
-        "t": [s.t for s in samples],
-        "device": [s.device for s in samples],
-        "protocol": [s.protocol for s in samples],
-        "seq": [s.seq for s in samples],
-        **{key: [v[key] for v in values] for key in VALUE_KEYS},
-        "changed": [list(s.changed) for s in samples],
-    }
-    arrays = [pa.array(columns[f.name], f.type) for f in STATE_COLUMNS]
-    return state_rows(pa.table(arrays, schema=STATE_COLUMNS))
+    partitioning; the source columns not yet), from the Arrow columns the samples build
+    (``samples.arrow``: a native ``SampleBatch`` makes no object per sample)."""
+    _rows, parts = samples.arrow(native_parquet.columns(STATE_COLUMNS))
+    return state_rows(native_parquet.batch_table(parts, STATE_COLUMNS))
 
 
 def state_rows(samples: pa.Table) -> pa.Table:

@@ -23,9 +23,9 @@ from __future__ import annotations
 import io
 import re
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
-from typing import IO, Any, Final
+from typing import IO, TYPE_CHECKING, Any, Final
 
 import orjson
 import pyarrow as pa
@@ -33,9 +33,6 @@ import pyarrow.compute as pc
 import pyarrow.json as pj
 import pyarrow.parquet as pq
 
-from decoders.model import Record
-
-from ..session.batches import records_jsonl
 from ..session.listener import Listener
 from .schema import (
     FAMILY,
@@ -57,6 +54,9 @@ from .schema import (
     millimetres,
     parse_key,
 )
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence
 
 ROW_GROUP_ROWS: Final = 65_536
 # JSONL parsed at a time, in two blocks (one per thread): Arrow's parser needs several times
@@ -482,8 +482,8 @@ class ParquetListener(Listener):
         self.label = f"Parquet output to {getattr(out, 'name', 'a stream')}"
         self.writer = ParquetRecordWriter(out)
 
-    def on_records(self, records: Sequence[Record]) -> None:
-        self.writer.write_jsonl(records_jsonl(records))
+    def on_records(self, records: RecordSequence) -> None:
+        self.writer.write_jsonl(records.jsonl())
 
     def close(self) -> None:
         self.writer.close()

@@ -29,23 +29,24 @@ import math
 import threading
 import time
 from array import array
-from collections.abc import Sequence
 from itertools import groupby
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import pyarrow as pa
 
 from decoders.model import Record
 
-from ..model import LEVEL_NAMES, WARNING, SourceEvent, StateSample
-from ..session.batches import column, sample_series
+from ..model import LEVEL_NAMES, WARNING, SourceEvent
 from ..session.listener import Listener
 from . import entities as ent
 from .batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
 from .blueprint import Layout, blueprint
 from .logs import log_rows
 from .target import RerunOutput, RerunTarget, parse_target
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence, SampleSequence
 
 NAN: Final = float("nan")  # no timestamp
 # a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
@@ -160,7 +161,7 @@ class _Shape:
     def extend(
         self, times: list[float | None], seqs: list[int], columns: list[list[Any]]
     ) -> list[int]:
-        """Add rows (a group of ``batches.sample_series``); the rows with a value that is not
+        """Add rows (a group of ``samples.series``); the rows with a value that is not
         a number are left out and their indexes returned."""
         try:
             numbers = [array("d", c) for c in columns]
@@ -397,12 +398,12 @@ class RerunListener(Listener):
 
     # -- what the session gives ------------------------------------------------------------
 
-    def on_states(self, samples: Sequence[StateSample]) -> None:
+    def on_states(self, samples: SampleSequence) -> None:
         """File the samples under their shapes, a column per plotted field
-        (``batches.sample_series``: a native batch makes no samples)."""
+        (``samples.series``: a native batch makes no samples)."""
         with self._lock:
             self._raise_failure()
-            for bus, device, fields, times, seqs, columns in sample_series(samples, _PLOTTED):
+            for bus, device, fields, times, seqs, columns in samples.series(_PLOTTED):
                 shape = self._shapes.get((bus, device, fields))
                 if shape is None:
                     shape = self._new_shape(bus, device, fields)
@@ -412,19 +413,19 @@ class RerunListener(Listener):
             self._mid_batch = False
             self._batch_done.notify_all()
 
-    def on_records(self, records: Sequence[Record]) -> None:
+    def on_records(self, records: RecordSequence) -> None:
         """Times per bus for the health rates, latencies, and the few records the logs show
         (problems, commands), made into objects only those (columns otherwise, in C loops:
         a capture's million records pass through here)."""
         with self._lock:
             self._raise_failure()
             self._mid_batch = True  # its samples come next
-            times = column(records, "t")
+            times = records.column("t")
             stamps = np.array(times, dtype=np.float64)  # None -> NaN
-            latencies = np.array(column(records, "latency_ms"), dtype=np.float64)
-            seqs = np.array(column(records, "seq"), dtype=np.int64)
+            latencies = np.array(records.column("latency_ms"), dtype=np.float64)
+            seqs = np.array(records.column("seq"), dtype=np.int64)
             self._extend_span(stamps, seqs)
-            for name, lo, hi in _runs(column(records, "bus")):
+            for name, lo, hi in _runs(records.column("bus")):
                 bus = self.buses.get(name) or self._bus(name)
                 part = times[lo:hi]
                 if None in part:
@@ -442,7 +443,7 @@ class RerunListener(Listener):
             self._logs(records)
             self._pending += len(records)
 
-    def _logs(self, records: Sequence[Record]) -> None:
+    def _logs(self, records: RecordSequence) -> None:
         """The records the logs show: problems in their bus's error log and health counts,
         commands and fault marks under their gripper (``plot/logs.log_rows``: columns, not
         one object per record, on the native path)."""

@@ -4,9 +4,10 @@ per gripper in one pass: a bus's error log (every record with errors or warnings
 its health rates count, a gripper's commands (requests that are not polls: ``WARN`` when
 flagged) and its fault marks (records with errors or fault flags).
 
-``log_rows`` takes a list of Records (this module's loop, the reference) or a native
-``RecordBatch``, which the native core reads without making a Record per record
-(``rerun_log_rows``, native/src/bindings/python_rerun.rs; tests/rerun require the same rows). A
+``log_rows`` asks the records' sequence (``rerun_log_rows``): a ``RecordSequence`` runs this
+module's loop (``records_log_rows``, the reference), a native ``RecordBatch`` reads its records
+without making a Record per record (native/src/bindings/python_rerun.rs; tests/rerun require the
+same rows). A
 warning-heavy capture shows most of its records in the logs.
 """
 
@@ -14,16 +15,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any, Final
+from typing import Any, Final, Protocol
 
 from decoders.eg2_can import OP_READ
 from decoders.eg2_serial import Cmd
 from decoders.flags import DEVICE_FAULT, ESTIMATED_TIME, FOREIGN, UNANSWERED
 from decoders.modbus_pdu import READ_HOLDING
 from decoders.model import EG2_CAN, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, Record
-
-from ..session.batches import RecordBatch
-from ..session.engine import _native
 
 # requests that only read (polls), by (protocol, code): the readings are plotted, the polls
 # are not listed as commands
@@ -34,7 +32,6 @@ POLLS: Final = frozenset(
 # flags that say nothing is wrong: not logged as problems
 QUIET_FLAGS: Final = frozenset({FOREIGN, ESTIMATED_TIME})
 
-_NATIVE_ROWS: Any = getattr(_native, "rerun_log_rows", None)
 _POLL_LIST: Final = sorted(POLLS)
 _QUIET_LIST: Final = sorted(QUIET_FLAGS)
 
@@ -49,24 +46,38 @@ BusRows = tuple[
 GripperRows = tuple[list[float], list[int], list[str | None], list[str], list[float], list[int]]
 
 
-def log_rows(
-    records: Sequence[Record],
-) -> tuple[dict[str, BusRows], dict[tuple[str, int], GripperRows]]:
-    """``(buses, grippers)``: each bus's and each gripper's rows, in the order first met."""
-    if _NATIVE_ROWS is not None and isinstance(records, RecordBatch):
-        rows: tuple[dict[str, BusRows], dict[tuple[str, int], GripperRows]]
-        rows = _NATIVE_ROWS(records, _POLL_LIST, _QUIET_LIST)
-        return rows
+LogRows = tuple[dict[str, BusRows], dict[tuple[str, int], GripperRows]]
+
+
+class LoggedRecords(Protocol):
+    """What ``log_rows`` asks of a record sequence (``RecordSequence``, the native
+    ``RecordBatch``); said here, not imported, as the session's sequences call this module."""
+
+    def rerun_log_rows(self, polls: Sequence[Any], quiet: Sequence[str]) -> LogRows: ...
+
+
+def log_rows(records: LoggedRecords) -> LogRows:
+    """``(buses, grippers)``: each bus's and each gripper's rows, in the order first met
+    (``records.rerun_log_rows``: a native batch makes no Record per record)."""
+    rows: LogRows = records.rerun_log_rows(_POLL_LIST, _QUIET_LIST)
+    return rows
+
+
+def records_log_rows(
+    records: Sequence[Record], polls: frozenset[tuple[str, int]], quiet: frozenset[str]
+) -> LogRows:
+    """``log_rows`` of Python Records (the reference the native ``rerun_log_rows`` follows);
+    ``polls`` and ``quiet``: ``POLLS`` and ``QUIET_FLAGS``."""
     buses: dict[str, BusRows] = {}
     grippers: dict[tuple[str, int], GripperRows] = {}
     for rec in records:
         problem = bool(rec.errors or rec.warnings)
-        command = rec.direction == REQUEST and (rec.protocol, rec.code) not in POLLS
+        command = rec.direction == REQUEST and (rec.protocol, rec.code) not in polls
         if not (problem or command):
             continue
         level = "INFO"
         if problem:
-            level = _problem(rec, buses, grippers, command)
+            level = _problem(rec, buses, grippers, command, quiet)
         if level and rec.device is not None and rec.kind == FRAME:
             g = grippers.get((rec.bus, rec.device)) or _new(grippers, (rec.bus, rec.device))
             _add(g, rec, rec.summary or rec.name, level)
@@ -78,11 +89,12 @@ def _problem(
     buses: dict[str, BusRows],
     grippers: dict[tuple[str, int], GripperRows],
     command: bool,
+    quiet_flags: frozenset[str],
 ) -> str:
     """A record with errors or warnings into its bus's rows (and a fault mark); the level of
     its command, "" for none."""
     bus = buses.get(rec.bus) or _new(buses, rec.bus, 7)
-    quiet = bool(rec.flags) and QUIET_FLAGS.issuperset(rec.flags)  # nothing wrong
+    quiet = bool(rec.flags) and quiet_flags.issuperset(rec.flags)  # nothing wrong
     if rec.errors:
         _add(bus, rec, problem_text(rec), "ERROR")
     elif not quiet:

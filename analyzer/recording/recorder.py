@@ -36,16 +36,8 @@ from decoders.model import CanFrame, Record
 
 from .. import __version__
 from ..lifecycle import Closing
-from ..model import ERROR, WARNING, Item, SourceEvent, StateSample
-from ..session.batches import (
-    can_raw_messages,
-    column,
-    json_message,
-    record_messages,
-    sample_keys,
-    sample_messages,
-    with_problems,
-)
+from ..model import ERROR, WARNING, Item, SourceEvent
+from ..session.batches import RecordSequence, SampleSequence, can_raw_messages, json_message
 from ..session.listener import Listener
 from .layout import (
     CAN_FRAME,
@@ -174,30 +166,31 @@ class McapRecorder(Closing, Listener):
             datas = [json_message(raw_message(item)) for item in items]
         self._gather([item.payload.t for item in items], channels, datas)
 
-    def on_records(self, records: Sequence[Record]) -> None:
+    def on_records(self, records: RecordSequence) -> None:
         """Decoded records on ``/decoded/<bus>``, and those with problems on ``/events/<bus>``
         (if ``log_record_problems``)."""
         self._check_open()
         known = self._channels[RECORD]
         self._gather(
-            column(records, "t"),
-            [known.get(bus) or self._channel(RECORD, bus) for bus in column(records, "bus")],
-            record_messages(records),
+            records.column("t"),
+            [known.get(bus) or self._channel(RECORD, bus) for bus in records.column("bus")],
+            records.messages(),
         )
         if self.log_record_problems:
-            problems = [self._problem(rec) for rec in with_problems(records)]
+            problems = [self._problem(records[i]) for i in records.problems()]
             if problems:
                 times, channels, datas = zip(*problems, strict=True)
                 self._gather(times, channels, datas)
 
-    def on_states(self, samples: Sequence[StateSample]) -> None:
+    def on_states(self, samples: SampleSequence) -> None:
         """One message per state sample on ``/state/<bus>/<device>``, at its record's time."""
         self._check_open()
         known = self._channels[DEVICE_STATE]
+        keys = samples.keys()  # (bus, device) per sample
         self._gather(
-            column(samples, "t"),
-            [known.get(key) or self._channel(DEVICE_STATE, *key) for key in sample_keys(samples)],
-            sample_messages(samples),
+            samples.column("t"),
+            [known.get(key) or self._channel(DEVICE_STATE, *key) for key in keys],
+            samples.messages(),
         )
 
     def on_event(self, event: SourceEvent) -> None:

@@ -1,13 +1,15 @@
-"""What listeners are handed: records and state samples as lists, or as the native core's batches.
+"""What listeners are handed: records and state samples as sequences with bulk methods, one
+kind per engine (the engine is chosen here, ``session_engine``).
 
-A session on CAN input with the native core built (``session_engine``) decodes with
-``_native.LiveCan`` and tracks with ``_native.Tracker``; the same records and samples as
-``stage.Decoding`` and ``tracker.Tracker`` (tests/native/test_live_native.py and
-test_tracker_native.py require it) come as a ``RecordBatch`` and a ``SampleBatch``. Both are
-sequences whose items become Python objects only when read; their bulk methods give a column
-(times, buses) or every item's JSON without any. The functions here take either kind, so a
-listener that writes JSON (the recorder) makes no object per frame on the native path and the
-same bytes on the Python one.
+A session on CAN input with the native core built decodes with ``_native.LiveCan`` and tracks
+with ``_native.Tracker``; the same records and samples as ``stage.Decoding`` and
+``tracker.Tracker`` (tests/native/test_live_native.py and test_tracker_native.py require it)
+come as a ``RecordBatch`` and a ``SampleBatch``, whose items become Python objects only when
+read. The Python engine hands out a ``RecordSequence`` and a ``SampleSequence``: lists with the
+same bulk methods (``column``, ``messages``, ``problems``, ``take``, ``series``, ...), the
+reference the native ones are tested against (tests/analyzer/test_sequences.py). Listeners
+call the methods, so a listener that writes JSON (the recorder) makes no object per frame on the
+native path and the same bytes on the Python one.
 
 Byte streams keep the Python decoders: their protocol is detected per stream, frames are timed
 per byte and ended by idle gaps, and a serial line carries a fraction of a CAN bus's frames.
@@ -15,9 +17,9 @@ per byte and ended by idle gaps, and a serial line carries a fraction of a CAN b
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from operator import attrgetter
-from typing import Any, Protocol
+from typing import Any, Final, Protocol
 
 import orjson
 
@@ -28,29 +30,25 @@ from .engine import ENGINES, _native
 from .stage import Decoding
 from .tracker import Tracker
 
-# the native batch classes (an empty tuple where the core is not built: isinstance is False)
-RecordBatch: Any = getattr(_native, "RecordBatch", ())
-SampleBatch: Any = getattr(_native, "SampleBatch", ())
-_CAN_RAW: Any = getattr(_native, "can_raw_messages", None)
-
 
 class SessionDecoding(Protocol):
-    """What a session asks of its decoding (``stage.Decoding`` or the native ``LiveCan``).
-    The native core answers with ``RecordBatch``es, which behave as these lists do where the
-    session uses them (``len``, iteration, indexing, ``+=`` of another)."""
+    """What a session asks of its decoding (``PythonDecoding`` or ``NativeCanDecoding``): records
+    as ``RecordSequence``s, or as the native core's ``RecordBatch``es, which behave alike where
+    the session uses them (``len``, iteration, indexing, ``+=`` of another, the bulk methods)."""
 
-    def feed_items(self, items: list[Any]) -> list[Record]: ...
-    def tick(self, now: float) -> list[Record]: ...
-    def gap(self, bus: str) -> list[Record]: ...
-    def cut_off(self, bus: str) -> list[Record]: ...
-    def finish(self) -> list[Record]: ...
-    def stop(self) -> list[Record]: ...
+    def feed_items(self, items: list[Any]) -> RecordSequence: ...
+    def tick(self, now: float) -> RecordSequence: ...
+    def gap(self, bus: str) -> RecordSequence: ...
+    def cut_off(self, bus: str) -> RecordSequence: ...
+    def finish(self) -> RecordSequence: ...
+    def stop(self) -> RecordSequence: ...
     def set_protocol(self, bus: str, protocol: str) -> None: ...
 
 
 def native_session_available() -> bool:
-    """The native core is built and has the session classes."""
-    return all(hasattr(_native, name) for name in ("LiveCan", "Tracker"))
+    """The native core is built (then it is complete: tests/native_core.py lists what the
+    product calls on it)."""
+    return _native is not None
 
 
 def session_engine(
@@ -72,8 +70,39 @@ def session_engine(
         raise ValueError(f"the native engine cannot decode this session: {why}")
     if native and engine != "python":
         return NativeCanDecoding(positional), _native.Tracker()  # type: ignore[union-attr]
-    decoding = Decoding(protocol, per_bus, positional_seq=positional, byte_time_s=byte_time_s)
-    return decoding, Tracker()
+    decoding = PythonDecoding(protocol, per_bus, positional_seq=positional, byte_time_s=byte_time_s)
+    return decoding, PythonTracker()
+
+
+class PythonDecoding(Decoding):
+    """``pipeline.Decoding`` handing out its records as ``RecordSequence``s, the Python kind of
+    what the native ``LiveCan`` hands out (``RecordBatch``es)."""
+
+    def feed_items(self, items: list[Any]) -> RecordSequence:
+        return RecordSequence(super().feed_items(items))
+
+    def tick(self, now: float) -> RecordSequence:
+        return RecordSequence(super().tick(now))
+
+    def gap(self, bus: str) -> RecordSequence:
+        return RecordSequence(super().gap(bus))
+
+    def cut_off(self, bus: str) -> RecordSequence:
+        return RecordSequence(super().cut_off(bus))
+
+    def finish(self) -> RecordSequence:
+        return RecordSequence(super().finish())
+
+    def stop(self) -> RecordSequence:
+        return RecordSequence(super().stop())
+
+
+class PythonTracker(Tracker):
+    """``tracker.Tracker`` handing out its samples as a ``SampleSequence``, the Python kind of
+    what the native ``Tracker`` hands out (``SampleBatch``es)."""
+
+    def update_many(self, records: list[Record]) -> SampleSequence:
+        return SampleSequence(super().update_many(records))
 
 
 class NativeCanDecoding:
@@ -93,108 +122,163 @@ class NativeCanDecoding:
         raise ValueError(f"a CAN session has no byte streams to decode as {protocol} ({bus})")
 
 
-def column(items: Sequence[Any], name: str) -> list[Any]:
-    """``[getattr(x, name) for x in items]`` for records or samples; a native batch reads it
-    from its Rust data without making an object per item."""
-    if isinstance(items, (RecordBatch, SampleBatch)):
-        return items.column(name)
-    return list(map(attrgetter(name), items))
+class RecordSequence(list[Record]):
+    """Records as a list (the Python engine's; the reference for the native ``RecordBatch``,
+    which has the same methods): a list, plus the bulk methods listeners read it with."""
 
+    __slots__ = ()
 
-def error_count(records: Sequence[Record]) -> int:
-    """How many of ``records`` have errors."""
-    if isinstance(records, RecordBatch):
-        return records.error_count()
-    return sum(1 for r in records if r.errors)
+    def column(self, name: str) -> list[Any]:
+        """``[getattr(rec, name) for rec in self]``."""
+        return list(map(attrgetter(name), self))
 
+    def error_count(self) -> int:
+        """How many records have errors."""
+        return sum(1 for r in self if r.errors)
 
-def problem_indexes(records: Sequence[Record]) -> list[int]:
-    """The indexes of the records that have errors or warnings."""
-    if isinstance(records, RecordBatch):
-        return records.problems()
-    return [i for i, r in enumerate(records) if r.errors or r.warnings]
+    def problems(self) -> list[int]:
+        """The indexes of the records that have errors or warnings."""
+        return [i for i, r in enumerate(self) if r.errors or r.warnings]
 
+    def take(self, indexes: Sequence[int]) -> RecordSequence:
+        """The records at ``indexes``, in that order, as a sequence of this kind."""
+        return RecordSequence([self[i] for i in indexes])
 
-def with_problems(records: Sequence[Record]) -> list[Record]:
-    """The records that have errors or warnings (made into objects only those, natively)."""
-    return [records[i] for i in problem_indexes(records)]
+    def messages(self) -> list[bytes]:
+        """Each record as its JSONL object (``Record.to_dict``), one bytes object each."""
+        return [json_message(r.to_dict()) for r in self]
 
+    def jsonl(self) -> bytes:
+        """The records as JSONL lines, as ``decode --format jsonl`` writes them."""
+        dumps = orjson.dumps
+        return b"".join([dumps(r.to_dict()) + b"\n" for r in self])
 
-def record_messages(records: Sequence[Record]) -> list[bytes]:
-    """Each record as its JSONL object (``Record.to_dict``), one bytes object each."""
-    if isinstance(records, RecordBatch):
-        return records.messages()
-    return [json_message(r.to_dict()) for r in records]
+    def rerun_log_rows(self, polls: Sequence[tuple[str, int]], quiet: Sequence[str]) -> Any:
+        """What ``eg2scope plot``'s logs show of these records (``rerun_logs.log_rows``)."""
+        from ..plot.logs import records_log_rows  # the plot's own module knows its texts
 
-
-def records_jsonl(records: Sequence[Record]) -> bytes:
-    """Records as JSONL lines, as ``decode --format jsonl`` writes them."""
-    if isinstance(records, RecordBatch):
-        messages = records.messages()
-        return b"\n".join(messages) + b"\n" if messages else b""
-    dumps = orjson.dumps
-    return b"".join([dumps(r.to_dict()) + b"\n" for r in records])
-
-
-def sample_keys(samples: Sequence[StateSample]) -> list[tuple[str, int]]:
-    """(bus, device) of each sample."""
-    if isinstance(samples, SampleBatch):
-        return samples.keys()
-    return [(s.bus, s.device) for s in samples]
+        return records_log_rows(self, frozenset(polls), frozenset(quiet))
 
 
 Series = tuple[str, int, tuple[str, ...], list[float | None], list[int], list[list[Any]]]
 
 
-def sample_series(samples: Sequence[StateSample], fields: Sequence[str]) -> list[Series]:
-    """The samples that changed any of ``fields``, grouped by gripper and by which of them
-    they changed: ``(bus, device, names, times, seqs, columns)`` per group, in the order groups
-    first appear, ``names`` in the order of ``fields``, one column of values per name (as the
-    samples hold them), samples in order. What a plot sends: a column per quantity."""
-    if isinstance(samples, SampleBatch):
-        return samples.series(tuple(fields))
-    wanted = tuple(fields)
-    groups: dict[tuple[str, int, tuple[str, ...]], Series] = {}
-    names_of: dict[tuple[str, ...], tuple[str, ...]] = {}  # changed keys -> names among fields
-    for s in samples:
-        changed = s.changed
-        keys = tuple(changed)
-        names = names_of.get(keys)
-        if names is None:
-            names = names_of[keys] = tuple(f for f in wanted if f in changed)
-        if not names:
-            continue
-        group = groups.get((s.bus, s.device, names))
-        if group is None:
-            group = groups[(s.bus, s.device, names)] = (
-                s.bus,
-                s.device,
-                names,
-                [],
-                [],
-                [[] for _ in names],
-            )
-        group[3].append(s.t)
-        group[4].append(s.seq)
-        for column_, name in zip(group[5], names, strict=True):
-            column_.append(changed[name])
-    return list(groups.values())
+class SampleSequence(list[StateSample]):
+    """State samples as a list (the Python tracker's; the reference for the native
+    ``SampleBatch``, which has the same methods)."""
+
+    __slots__ = ()
+
+    def column(self, name: str) -> list[Any]:
+        """``[getattr(sample, name) for sample in self]``."""
+        return list(map(attrgetter(name), self))
+
+    def keys(self) -> list[tuple[str, int]]:
+        """(bus, device) of each sample."""
+        return [(s.bus, s.device) for s in self]
+
+    def messages(self) -> list[bytes]:
+        """Each sample as its flat JSON object (``StateSample.to_dict``), one bytes object each."""
+        return [json_message(s.to_dict()) for s in self]
+
+    def series(self, fields: Sequence[str]) -> list[Series]:
+        """The samples that changed any of ``fields``, grouped by gripper and by which of them
+        they changed: ``(bus, device, names, times, seqs, columns)`` per group, in the order
+        groups first appear, ``names`` in the order of ``fields``, one column of values per name
+        (as the samples hold them), samples in order. What a plot sends: a column per quantity."""
+        wanted = tuple(fields)
+        groups: dict[tuple[str, int, tuple[str, ...]], Series] = {}
+        names_of: dict[tuple[str, ...], tuple[str, ...]] = {}  # changed keys -> names
+        for s in self:
+            changed = s.changed
+            keys = tuple(changed)
+            names = names_of.get(keys)
+            if names is None:
+                names = names_of[keys] = tuple(f for f in wanted if f in changed)
+            if not names:
+                continue
+            group = groups.get((s.bus, s.device, names))
+            if group is None:
+                group = groups[(s.bus, s.device, names)] = (
+                    s.bus,
+                    s.device,
+                    names,
+                    [],
+                    [],
+                    [[] for _ in names],
+                )
+            group[3].append(s.t)
+            group[4].append(s.seq)
+            for column_, name in zip(group[5], names, strict=True):
+                column_.append(changed[name])
+        return list(groups.values())
+
+    def arrow(self, columns: Sequence[tuple[str, str, int]]) -> tuple[int, list[Any]]:
+        """The samples as Arrow columns described as ``native_parquet.columns`` describes them
+        (top-level names: a sample's attributes or its ``values`` keys; ``changed``: the names
+        it changed): ``(rows, parts)`` as ``native_parquet.batch_table`` reads them."""
+        import pyarrow as pa  # only the fleet dataset asks: not loaded for every session
+
+        described = iter(columns)
+        parts: list[Any] = []
+        for name, kind, children in described:
+            type_ = _arrow_type(kind, children, described)
+            _arrow_parts(pa.array(self._values_of(name), type_), parts)
+        return len(self), parts
+
+    def _values_of(self, name: str) -> list[Any]:
+        if name == "changed":
+            return [list(s.changed) for s in self]
+        if name in _SAMPLE_ATTRIBUTES:
+            return self.column(name)
+        return [s.values[name] for s in self]
 
 
-def sample_messages(samples: Sequence[StateSample]) -> list[bytes]:
-    """Each sample as its flat JSON object (``StateSample.to_dict``), one bytes object each."""
-    if isinstance(samples, SampleBatch):
-        return samples.messages()
-    return [json_message(s.to_dict()) for s in samples]
+_SAMPLE_ATTRIBUTES: Final = frozenset({"t", "bus", "device", "protocol", "seq"})
+
+
+def _arrow_type(kind: str, children: int, described: Iterator[tuple[str, str, int]]) -> Any:
+    """The Arrow type of a described column (its children follow it in ``described``)."""
+    import pyarrow as pa
+
+    if kind == "struct":
+        fields = []
+        for _ in range(children):
+            name, child_kind, grandchildren = next(described)
+            fields.append(pa.field(name, _arrow_type(child_kind, grandchildren, described)))
+        return pa.struct(fields)
+    if kind == "list":
+        _name, child_kind, grandchildren = next(described)
+        return pa.list_(_arrow_type(child_kind, grandchildren, described))
+    scalars = {"int64": pa.int64(), "float64": pa.float64(), "string": pa.string()}
+    return pa.bool_() if kind == "bool" else scalars[kind]
+
+
+def _arrow_parts(array: Any, parts: list[Any]) -> None:
+    """An array and its children, depth first, as the core hands them out:
+    ``(length, nulls, validity, values, data)``."""
+    import pyarrow as pa
+
+    buffers = array.buffers()
+    if pa.types.is_struct(array.type):
+        parts.append((len(array), array.null_count, buffers[0], None, None))
+        for i in range(array.type.num_fields):
+            _arrow_parts(array.field(i), parts)
+    elif pa.types.is_list(array.type):
+        parts.append((len(array), array.null_count, buffers[0], buffers[1], None))
+        _arrow_parts(array.values, parts)
+    else:
+        data = buffers[2] if len(buffers) > 2 else None
+        parts.append((len(array), array.null_count, buffers[0], buffers[1], data))
 
 
 def can_raw_messages(items: list[Any]) -> list[bytes] | None:
     """Each item's ``/raw`` message (the recorder's CAN frame JSON), from the native core, when
     every item is a CAN frame and the core is built; None otherwise (the recorder makes them)."""
-    if _CAN_RAW is None or not items or type(items[0].payload) is not CanFrame:
+    if _native is None or not items or type(items[0].payload) is not CanFrame:
         return None
     try:
-        return _CAN_RAW(items)
+        return _native.can_raw_messages(items)
     except TypeError:  # a byte chunk among them
         return None
 

@@ -5,11 +5,11 @@ the progress bar, and the exit status a session ends with (docs/contracts.md).""
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from decoders.model import EG2_CAN, EG2_SERIAL, MODBUS_RTU, Record
+from decoders.model import EG2_CAN, EG2_SERIAL, MODBUS_RTU
 from decoders.registry import PROTOCOL_WORDS, short_name, valid_frames
 
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
@@ -18,6 +18,7 @@ from ..outfile import OutputError
 from ..sources import sniff
 from ..sources.capture import CaptureReader, GzipBytesReader, RawBytesReader, open_capture
 from ..sources.source import CaptureSource
+from .batches import RecordSequence, SampleSequence
 from .listener import Listener
 from .session import Session, SessionCounts, SessionOptions
 from .stage import DETECT_BYTES
@@ -59,15 +60,18 @@ class CaptureOptions:
         words = [] if self.device is None else [f"--device {self.device}"]
         return " ".join(words + (["--errors-only"] if self.errors_only else []))
 
-    def record_filter(self) -> Callable[[Record], bool] | None:
+    def record_filter(self) -> RecordFilter | None:
+        """Which records of a batch ``--device`` and ``--errors-only`` keep (None: all)."""
         device, errors_only = self.device, self.errors_only
         if device is None and not errors_only:
             return None
 
-        def keep(rec: Record) -> bool:
-            if device is not None and rec.device != device:
-                return False
-            return not errors_only or bool(rec.errors or rec.warnings)
+        def keep(records: RecordSequence) -> list[int]:
+            indexes = records.problems() if errors_only else range(len(records))
+            if device is None:
+                return list(indexes)
+            devices = records.column("device")
+            return [i for i in indexes if devices[i] == device]
 
         return keep
 
@@ -105,10 +109,15 @@ def byte_protocol(opts: CaptureOptions) -> str | None:
     return None if opts.protocol == EG2_CAN else opts.protocol
 
 
-class FilteredListener(Listener):
-    """Passes on only the records ``keep`` accepts (``--device``, ``--errors-only``)."""
+#: the indexes of the records of a batch to pass on
+RecordFilter = Callable[[RecordSequence], list[int]]
 
-    def __init__(self, inner: Listener, keep: Callable[[Record], bool]) -> None:
+
+class FilteredListener(Listener):
+    """Passes on only the records ``keep`` picks (``--device``, ``--errors-only``): a batch of
+    the kind it came in (``records.take``), a native one still without a Record per record."""
+
+    def __init__(self, inner: Listener, keep: RecordFilter) -> None:
         self.inner = inner
         self.keep = keep
         self.kept = 0  # records passed on
@@ -116,14 +125,14 @@ class FilteredListener(Listener):
         self.wants_raw = inner.wants_raw
         self.label = getattr(inner, "label", type(inner).__name__)
 
-    def on_records(self, records: Sequence[Record]) -> None:
-        keep = self.keep
-        kept = [r for r in records if keep(r)]
-        if kept:
-            self.kept += len(kept)
+    def on_records(self, records: RecordSequence) -> None:
+        indexes = self.keep(records)
+        if indexes:
+            self.kept += len(indexes)
+            kept = records if len(indexes) == len(records) else records.take(indexes)
             self.inner.on_records(kept)
 
-    def on_states(self, samples: Sequence[Any]) -> None:
+    def on_states(self, samples: SampleSequence) -> None:
         self.inner.on_states(samples)
 
     def on_event(self, event: SourceEvent) -> None:
@@ -171,7 +180,7 @@ class ProgressListener(Listener):
         self.task = self.progress.add_task(reader.path.name, total=reader.size or None, records=0)
         self.progress.start()
 
-    def on_records(self, records: Sequence[Record]) -> None:
+    def on_records(self, records: RecordSequence) -> None:
         self.records += len(records)
 
     def tick(self, now: float) -> None:

@@ -70,7 +70,7 @@ def ineligible(reader: CaptureReader, fmt: str, speed: float | None, device: int
     """Why the native core cannot decode this capture this way ("" when it can)."""
     if _native is None:
         return f"the native core is {WHY_NOT}"
-    if fmt not in FORMATS and not (fmt == "parquet" and hasattr(_native, "ArrowRun")):
+    if fmt not in FORMATS and fmt != "parquet":
         return f"the native core does not write --format {fmt}"
     if speed is not None:
         return "a timed replay (--speed) runs on the Python engine only"
@@ -96,10 +96,9 @@ def candump_frames(reader: CaptureReader) -> Any:
     (``_native.CandumpFrames``: the reader ``decode`` uses, batches of frames that the native
     ``LiveCan`` decodes with no Python object per frame), or None: the Python reader reads it
     (not a candump log on a regular file, or the core does not read it)."""
-    if _native is None or not hasattr(_native, "CandumpFrames"):
-        return None
     if ineligible(reader, "jsonl", None, None):
         return None
+    assert _native is not None  # ineligible() said so
     try:
         return _native.CandumpFrames(str(reader.path), reader.bus or None)
     except (_native.Unsupported, OSError):

@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from decoders.model import Record
+from ..model import Item, SourceEvent
 
-from ..model import Item, SourceEvent, StateSample
+if TYPE_CHECKING:
+    from .batches import RecordSequence, SampleSequence
 
 
 class Listener(ABC):
@@ -33,12 +33,14 @@ class Listener(ABC):
     wants_raw: bool = False
 
     @abstractmethod
-    def on_records(self, records: Sequence[Record]) -> None:
-        """Decoded records, in stream order: a list, or the native core's lazy ``RecordBatch``
-        (a sequence of the same records; ``analyzer.session.batches`` reads either in bulk)."""
+    def on_records(self, records: RecordSequence) -> None:
+        """Decoded records, in stream order: a ``RecordSequence`` (Python engine) or the native
+        core's lazy ``RecordBatch``, the same sequence with the same bulk methods (``column``,
+        ``messages``, ``problems``, ``take``, ...: analyzer/session/batches.py)."""
 
-    def on_states(self, samples: Sequence[StateSample]) -> None:
-        """State samples (one per record that set a gripper's state), in stream order."""
+    def on_states(self, samples: SampleSequence) -> None:
+        """State samples (one per record that set a gripper's state), in stream order: a
+        ``SampleSequence`` or the native ``SampleBatch`` (``column``, ``keys``, ``series``, ...)."""
 
     def on_event(self, event: SourceEvent) -> None:
         """A source event (opened, lost, reopened, drops, passive, ...), in time order with the

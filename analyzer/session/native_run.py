@@ -136,6 +136,7 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
     """Write a native run's output into ``out`` (a binary stream, or a text stream whose buffer
     takes the bytes); report damage on stderr; the exit code, as capture.finish_capture
     gives it for the Python engine."""
+    assert _native is not None  # a native run: the core is built
     binary: IO[bytes] = out
     if isinstance(out, io.TextIOBase):
         out.flush()  # anything written as text before goes first
@@ -145,7 +146,7 @@ def decode(run: Any, path: str, out: IO[Any], output_name: str | None, progress:
     try:
         with signals_as_interrupt(), _progress(path, run, progress) as bar:
             try:
-                if isinstance(run, getattr(_native, "ArrowRun", ())):  # --format parquet
+                if isinstance(run, _native.ArrowRun):  # --format parquet
                     from ..parquet.native import write
 
                     write(run, binary, None if bar is None else lambda: _tick(bar, run))

@@ -50,6 +50,7 @@ from ..errors import EXIT_OK
 from ..model import Item
 from ..sources.can_files import CandumpReader, is_gzip
 from ..sources.capture import RawBytesReader, can_bus_name
+from .batches import RecordSequence
 from .listener import Listener
 from .stage import Decoding
 
@@ -293,7 +294,7 @@ class _PartDecoder:
                     if (job.device is None or r.device == job.device)
                     and (not job.errors_only or r.errors or r.warnings)
                 ]
-            self.output.on_records(mine)
+            self.output.on_records(RecordSequence(mine))
 
     def check_end(self) -> None:
         """At the end of the overrun nothing of the part may still be undecided."""
@@ -512,7 +513,15 @@ def resumed(listener: Listener, resume: int) -> Listener:
     where a split decode's written output ends)."""
     from .capture import FilteredListener
 
-    return FilteredListener(listener, lambda rec: _position(rec) >= resume)
+    def keep(records: RecordSequence) -> list[int]:
+        offsets, indexes = records.column("offset"), records.column("index")
+        return [
+            i
+            for i, (offset, index) in enumerate(zip(offsets, indexes, strict=True))
+            if (offset if offset is not None else (index or 0)) >= resume
+        ]
+
+    return FilteredListener(listener, keep)
 
 
 class _PartProgress:

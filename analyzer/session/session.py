@@ -28,18 +28,16 @@ import gc
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
-
-from decoders.model import Record
 
 from .. import interrupts
 from ..model import ERROR, SourceEvent
 from ..sources.live import CLOSED, LOST, Tap
 from ..sources.source import Batch, LiveSource, Source
-from .batches import NativeCanDecoding, error_count, session_engine
+from .batches import NativeCanDecoding, RecordSequence, session_engine
 from .listener import Listener
 from .timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 
@@ -217,7 +215,7 @@ class Session:
     def _emit(
         self,
         items: list[Any],
-        records: Sequence[Record],
+        records: RecordSequence,
         event: SourceEvent | None = None,
         flush: bool = False,
     ) -> None:
@@ -229,22 +227,23 @@ class Session:
                 self._event(event)
             return
         order.hear(items)
-        held: list[Any] = [*records, event] if event is not None else list(records)
+        # a source event rides among the records (TimeMerge reads its bus and time as theirs)
+        held = RecordSequence([*records, event] if event is not None else records)
         out = list(order.push(held, time.time() if self.source.live else None))
         if flush:
             out += order.flush()
-        self._deliver(items, [])
-        run: list[Record] = []
+        self._deliver(items, RecordSequence())
+        run = RecordSequence()
         for x in out:  # runs of records, and the events between them
             if type(x) is SourceEvent:
                 self._deliver([], run)
-                run = []
+                run = RecordSequence()
                 self._event(x)
             else:
                 run.append(x)
         self._deliver([], run)
 
-    def _deliver(self, items: list[Any], records: Sequence[Record]) -> None:
+    def _deliver(self, items: list[Any], records: RecordSequence) -> None:
         counts = self.counts
         if items:
             counts.items += len(items)
@@ -254,7 +253,7 @@ class Session:
         if not records:
             return
         counts.records += len(records)
-        counts.errors += error_count(records)
+        counts.errors += records.error_count()
         samples = self.tracker.update_many(records)
         counts.samples += len(samples)
         for listener in tuple(self.listeners):

@@ -35,7 +35,7 @@ from typing import Any, Final
 
 from decoders.model import Record
 
-from .batches import column
+from .batches import RecordSequence
 
 CAPTURE_HOLD_S: Final = 2.0  # capture seconds a quiet bus may hold the others back
 LIVE_HOLD_S: Final = 0.3  # live: about a batching window and a serial line's idle gap
@@ -79,21 +79,22 @@ class TimeMerge:
             elif t > heard[bus]:
                 heard[bus] = t
 
-    def push(self, records: Sequence[Record], now: float | None = None) -> Sequence[Record]:
-        """Take a batch (in stream order); ``now``: the wall clock of a live session."""
+    def push(self, records: RecordSequence, now: float | None = None) -> RecordSequence:
+        """Take a batch (in stream order); ``now``: the wall clock of a live session. What is
+        ready comes out as a sequence: the batch itself, or a ``RecordSequence``."""
         if not records:
             return self.advance(now)
-        buses = column(records, "bus")
+        buses = records.column("bus")
         only = buses[0]
         if (
             not self._held_count
             and set(self.heard) | set(self.reached) <= {only}
             and all(b == only for b in buses)
         ):
-            self._reach(only, column(records, "t"))
+            self._reach(only, records.column("t"))
             return records  # one bus so far: its stream order is the order
         reached, held, arrival = self.reached, self._held, self._arrival
-        for rec, bus, t in zip(records, buses, column(records, "t"), strict=True):
+        for rec, bus, t in zip(records, buses, records.column("t"), strict=True):
             last = reached.get(bus, -math.inf)
             key = last if t is None or t < last else t
             reached[bus] = key
@@ -104,11 +105,11 @@ class TimeMerge:
         self._held_count += len(records)
         return self.advance(now)
 
-    def advance(self, now: float | None = None) -> list[Record]:
+    def advance(self, now: float | None = None) -> RecordSequence:
         """The held records every bus still talking has reached (``now``: the wall clock,
         live, so quiet buses stop holding the others back while nothing arrives)."""
         if not self._held_count:
-            return []
+            return RecordSequence()
         buses = set(self.reached) | set(self.heard)
         heard = {b: self.heard.get(b, self.reached.get(b, -math.inf)) for b in buses}
         clock = max(heard.values())
@@ -125,7 +126,7 @@ class TimeMerge:
             out += self._release(math.inf, self._held_count - self.max_held)
         return out
 
-    def flush(self) -> list[Record]:
+    def flush(self) -> RecordSequence:
         return self._release(math.inf)
 
     def _reach(self, bus: str, times: Sequence[float | None]) -> None:
@@ -135,11 +136,11 @@ class TimeMerge:
                 reached = t
         self.reached[bus] = reached
 
-    def _release(self, until: float, most: int | None = None) -> list[Record]:
+    def _release(self, until: float, most: int | None = None) -> RecordSequence:
         """Held records up to ``until``, in order (``most``: no more than that many)."""
         heads = [(q[0], bus) for bus, q in self._held.items() if q and q[0][0] <= until]
         heapq.heapify(heads)
-        out: list[Record] = []
+        out = RecordSequence()
         held = self._held
         while heads and (most is None or len(out) < most):
             (_, _, rec), bus = heads[0]

@@ -6,16 +6,15 @@ time order with the frames.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 import orjson
 
-from decoders.model import Record
-
 from ..model import SourceEvent
-from ..session.batches import records_jsonl
 from ..session.listener import Listener
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence
 
 
 class JsonlListener(Listener):
@@ -23,8 +22,8 @@ class JsonlListener(Listener):
         self.out = out
         self.label = f"JSONL output to {getattr(out, 'name', 'a stream')}"
 
-    def on_records(self, records: Sequence[Record]) -> None:
-        self.out.write(records_jsonl(records))
+    def on_records(self, records: RecordSequence) -> None:
+        self.out.write(records.jsonl())
 
     def on_event(self, event: SourceEvent) -> None:
         self.out.write(orjson.dumps(event.to_dict()) + b"\n")

@@ -7,15 +7,16 @@ from __future__ import annotations
 
 from bisect import bisect_left
 from collections import deque
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from decoders import flags as F
-from decoders.model import FRAME, REQUEST, RESPONSE, Record
+from decoders.model import FRAME, REQUEST, RESPONSE
 
-from ..session.batches import column
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence
+
 
 LATENCY_KEEP: Final = 2000  # latencies kept per key for percentiles (the latest)
 HISTOGRAM_BINS: Final = 8
@@ -107,11 +108,11 @@ class Aggregates:
         self._dirty_command: set[str] = set()
         self._dirty_device: set[DeviceKey] = set()
 
-    def add(self, records: Sequence[Record], first_index: int) -> None:
-        """Fold a batch in, a column at a time (``batches.column``: a native batch makes no
+    def add(self, records: RecordSequence, first_index: int) -> None:
+        """Fold a batch in, a column at a time (``records.column``: a native batch makes no
         records); ``first_index``: the store index of its first record."""
         names = ("flags", "kind", "device", "errors", "bus", "latency_ms", "direction", "name")
-        rows = zip(*(column(records, n) for n in names), strict=True)
+        rows = zip(*(records.column(n) for n in names), strict=True)
         frames = []  # (index in the batch, bus, device) of the valid frames of a gripper
         protocols: list[str] | None = None
         for k, (flags, kind, device, errors, bus, latency, direction, name) in enumerate(rows):
@@ -123,15 +124,15 @@ class Aggregates:
             frames.append((k, key))
             if latency is not None and direction == RESPONSE:
                 if not name:  # as the frame list names it: by its protocol
-                    protocols = protocols or column(records, "protocol")
+                    protocols = protocols or records.column("protocol")
                     name = protocols[k]
                 self._latency(self.latency_command, name, latency)
                 self._latency(self.latency_device, key, latency)
                 self._dirty_command.add(name)
                 self._dirty_device.add(key)
         if frames:
-            fields, directions = column(records, "fields"), column(records, "direction")
-            protocols, times = column(records, "protocol"), column(records, "t")
+            fields, directions = records.column("fields"), records.column("direction")
+            protocols, times = records.column("protocol"), records.column("t")
             for k, key in frames:
                 self._registers(fields[k], directions[k], protocols[k], times[k], key)
 

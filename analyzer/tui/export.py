@@ -13,6 +13,7 @@ from decoders.model import EG2_CAN, FOREIGN_CAN, CanFrame, Chunk, Record
 
 from ..model import Item
 from ..recording.recorder import McapRecorder
+from ..session.batches import RecordSequence
 from ..sinks.csv import CsvListener
 from ..sinks.jsonl import JsonlListener
 from .store import RecordStore
@@ -29,13 +30,13 @@ def export_format(path: str) -> str:
     return fmt
 
 
-def _batches(records: Iterable[Record]) -> Iterator[list[Record]]:
-    batch: list[Record] = []
+def _batches(records: Iterable[Record]) -> Iterator[RecordSequence]:
+    batch = RecordSequence()
     for rec in records:
         batch.append(rec)
         if len(batch) >= BATCH:
             yield batch
-            batch = []
+            batch = RecordSequence()
     if batch:
         yield batch
 

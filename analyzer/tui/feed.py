@@ -18,18 +18,21 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Sequence
-from typing import Any, Final, Protocol
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from decoders import flags as F
 from decoders.model import Record
 
-from ..model import SourceEvent, StateSample
+from ..model import SourceEvent
 from ..session.listener import Listener
 from ..session.timeorder import CAPTURE_HOLD_S, LIVE_HOLD_S, TimeMerge
 from .aggregates import Aggregates
 from .messages import DeviceRow, FeedUpdate
 from .store import RecordStore
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence, SampleSequence
 
 POST_INTERVAL_S: Final = 0.1  # 10 updates a second
 PANELS_INTERVAL_S: Final = 1.0  # the panels' tables (problems, registers, latency) this often
@@ -96,10 +99,10 @@ class TuiFeed(Listener):
 
     # -- the listener (the session's thread) -------------------------------------------------
 
-    def on_records(self, records: Sequence[Record]) -> None:
+    def on_records(self, records: RecordSequence) -> None:
         self._store(self.merge.push(records, time.time() if self.live else None))
 
-    def _store(self, records: Sequence[Record]) -> None:
+    def _store(self, records: RecordSequence) -> None:
         if not records:
             return
         first = self.store.count
@@ -118,7 +121,7 @@ class TuiFeed(Listener):
     def on_raw(self, items: list[Any]) -> None:
         self.merge.hear(items)
 
-    def on_states(self, samples: Sequence[StateSample]) -> None:
+    def on_states(self, samples: SampleSequence) -> None:
         changed = self._changed
         for s in samples:
             for name in s.changed:

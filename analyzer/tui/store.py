@@ -22,14 +22,16 @@ import zlib
 from array import array
 from bisect import bisect_left
 from collections.abc import Iterable, Iterator, Sequence
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import orjson
 
 from decoders.model import FRAME, REQUEST, RESPONSE, Record
 
 from ..model import json_default
-from ..session.batches import column
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence
 
 BLOCK: Final = 256  # records per compressed block
 MAX_FLAG_BITS: Final = 63  # bit 63 collects codes beyond the first 63 seen
@@ -148,13 +150,13 @@ class RecordStore:
 
     # -- writing (one thread) --------------------------------------------------------------
 
-    def append(self, records: Sequence[Record]) -> None:
-        """Add a batch of records (in stream order), a column at a time (``batches.column``:
+    def append(self, records: RecordSequence) -> None:
+        """Add a batch of records (in stream order), a column at a time (``records.column``:
         from a native batch without making the records; a Python loop with a dozen appends
         per record costs three times as much)."""
         if not records:
             return
-        times = column(records, "t")
+        times = records.column("t")
         known: list[float] = [t for t in times if t is not None]
         if known:
             low = min(known)
@@ -164,46 +166,46 @@ class RecordStore:
             if self.t_last is None or top > self.t_last:
                 self.t_last = top
         self.t.extend(_filled(times, NAN))
-        seqs = column(records, "seq")
+        seqs = records.column("seq")
         if self._seq_sorted and ((self.seq and seqs[0] < self.seq[-1]) or seqs != sorted(seqs)):
             self._seq_sorted = False
         self.seq.extend(seqs)
-        self.bus.extend(self.buses.ids_of(column(records, "bus")))
-        self.device.extend(_filled(column(records, "device"), NONE_DEVICE))
+        self.bus.extend(self.buses.ids_of(records.column("bus")))
+        self.device.extend(_filled(records.column("device"), NONE_DEVICE))
         directions = DIRECTIONS
-        self.direction.extend([directions.get(d, 0) for d in column(records, "direction")])
-        protocols, kinds = column(records, "protocol"), column(records, "kind")
+        self.direction.extend([directions.get(d, 0) for d in records.column("direction")])
+        protocols, kinds = records.column("protocol"), records.column("kind")
         names = [
             n or (p if k == FRAME else k)
-            for n, p, k in zip(column(records, "name"), protocols, kinds, strict=True)
+            for n, p, k in zip(records.column("name"), protocols, kinds, strict=True)
         ]
         self.name.extend(self.names.ids_of(names))
         self.protocol.extend(self.protocols.ids_of(protocols))
         self.kind.extend(self.kinds.ids_of(kinds))
         mask = self.flag_bits.mask
-        flags = column(records, "flags")
+        flags = records.column("flags")
         self.flags.extend([mask(f) if f else 0 for f in flags])
-        errors, warnings = column(records, "errors"), column(records, "warnings")
+        errors, warnings = records.column("errors"), records.column("warnings")
         self.severity.extend(
             [ERROR if e else WARNING if w else OK for e, w in zip(errors, warnings, strict=True)]
         )
-        self.latency.extend(_filled(column(records, "latency_ms"), NAN))
-        self.pair.extend(_filled(column(records, "pair"), NONE_SEQ))
+        self.latency.extend(_filled(records.column("latency_ms"), NAN))
+        self.pair.extend(_filled(records.column("pair"), NONE_SEQ))
         summaries = self._summaries
         if len(summaries) >= SUMMARY_INTERN_LIMIT:
             summaries.clear()
         intern = summaries.setdefault
-        self.summary.extend([intern(x, x) for x in column(records, "summary")])
+        self.summary.extend([intern(x, x) for x in records.column("summary")])
         details = zip(
-            column(records, "fields"),
+            records.column("fields"),
             errors,
             warnings,
             flags,
-            [raw.hex() for raw in column(records, "raw")],
-            column(records, "code"),
-            column(records, "offset"),
-            column(records, "index"),
-            column(records, "length"),
+            [raw.hex() for raw in records.column("raw")],
+            records.column("code"),
+            records.column("offset"),
+            records.column("index"),
+            records.column("length"),
             strict=True,
         )
         self._add_details(list(details))

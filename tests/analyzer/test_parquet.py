@@ -31,7 +31,7 @@ from protocol_vectors import load
 from analyzer.model import Item, SourceEvent
 from analyzer.parquet import writer as P
 from analyzer.parquet.schema import FAMILY, RECORD_COLUMNS, SCHEMA
-from analyzer.session.batches import records_jsonl
+from analyzer.session.batches import RecordSequence
 from analyzer.session.stage import Decoding
 from decoders import build as b
 from decoders.eg2_serial import Cmd
@@ -202,7 +202,7 @@ def _rest(f: CanFrame) -> tuple[Any, ...]:
 def decoded_jsonl(items: list[Item], protocol: str | None = None) -> bytes:
     """The Python engine's JSONL of items (Decoding with pairing and lint)."""
     records = list(Decoding(protocol=protocol, positional_seq=True).feed_many(items))
-    return records_jsonl(records)
+    return RecordSequence(records).jsonl()
 
 
 def byte_items(data: bytes, bus: str = "serial") -> list[Item]:

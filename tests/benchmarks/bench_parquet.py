@@ -116,6 +116,7 @@ def native_arrow_available() -> bool:
 def child_listener(capture: Path, protocol: str, out: Path) -> dict[str, float]:
     from analyzer.model import Item
     from analyzer.parquet.writer import ParquetListener
+    from analyzer.session.batches import RecordSequence
     from analyzer.session.stage import Decoding
     from analyzer.sources.can_files import open_can_file
     from decoders.model import Chunk
@@ -126,8 +127,9 @@ def child_listener(capture: Path, protocol: str, out: Path) -> dict[str, float]:
     with out.open("wb") as f:
         listener = ParquetListener(f)
 
-        def give(records: list) -> None:
+        def give(batch: list) -> None:
             nonlocal spent, cpu, rows
+            records = RecordSequence(batch)  # what a session hands its listeners
             start, cpu0 = time.perf_counter(), time.process_time()
             listener.on_records(records)
             spent += time.perf_counter() - start

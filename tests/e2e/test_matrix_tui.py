@@ -18,7 +18,7 @@ from textual.worker import Worker, WorkerState
 
 from analyzer.cli import build_parser
 from analyzer.commands.tui import capture_plan
-from analyzer.session.batches import record_messages
+from analyzer.session.batches import RecordSequence
 from analyzer.session.session import Session
 from analyzer.tui.app import Eg2ScopeApp
 
@@ -31,8 +31,8 @@ def stored_by_bus(app: Eg2ScopeApp) -> dict[str, list[dict[str, Any]]]:
     """The store's records as their JSONL objects, per bus, in the store's order."""
     store = app.store
     buses: dict[str, list[dict[str, Any]]] = {}
-    records = list(store.records(range(store.count)))
-    for record, line in zip(records, record_messages(records), strict=True):
+    records = RecordSequence(store.records(range(store.count)))
+    for record, line in zip(records, records.messages(), strict=True):
         buses.setdefault(record.bus, []).append(orjson.loads(line))
     return buses
 

@@ -1,5 +1,5 @@
 """``SampleBatch.series(fields)`` against the Python reference,
-``analyzer.session.batches.sample_series`` given a plain list of the same samples (the Python path).
+``analyzer.session.batches.SampleSequence`` of the same samples (the Python path).
 
 The groups must be equal with identical types, recursively (an int is not a float or a bool,
 ``-0.0`` is not ``0.0``, a list is not a tuple): the same groups in the same order, the same
@@ -28,7 +28,7 @@ from native_core import skip_or_fail, why_not
 
 from analyzer.model import StateSample
 from analyzer.session import engine as native
-from analyzer.session.batches import sample_series
+from analyzer.session.batches import SampleSequence
 from analyzer.session.stage import Decoding
 from analyzer.session.tracker import VALUE_KEYS, Tracker
 from decoders.model import EG2_SERIAL, MODBUS_RTU, Record
@@ -77,12 +77,12 @@ def check(batch: Any, want: list[StateSample] | None = None, where: str = "") ->
     for fields, series in got.items():
         label = f"{where} {fields!r}"
         assert type(series) is list, label
-        ref = sample_series(samples, fields)
+        ref = SampleSequence(samples).series(fields)
         assert (why := bc.differs(series, ref)) is None, f"{label}: {why}"
         if want is not None:
-            assert (why := bc.differs(series, sample_series(want, fields))) is None, label
-        # through the function (which hands a native batch to series) and again: the same
-        assert (why := bc.differs(sample_series(batch, fields), ref)) is None, label
+            assert (why := bc.differs(series, SampleSequence(want).series(fields))) is None, label
+        # asked again: the same
+        assert (why := bc.differs(batch.series(fields), ref)) is None, label
         for _, _, names, times, seqs, columns in series:
             assert type(names) is tuple and len(columns) == len(names), label
             assert all(len(c) == len(times) == len(seqs) for c in columns), label
@@ -201,8 +201,8 @@ def test_generated_records(batches: list[list[Record]], fields: list[str]) -> No
     for batch in batches:
         got, want = nat._update_records(batch), py.update_many(batch)
         series = got.series(tuple(fields))
-        assert bc.differs(series, sample_series(list(got), fields)) is None
-        assert bc.differs(series, sample_series(want, fields)) is None
+        assert bc.differs(series, SampleSequence(list(got)).series(fields)) is None
+        assert bc.differs(series, SampleSequence(want).series(fields)) is None
         check(got, want)
 
 
@@ -212,23 +212,25 @@ def test_generated_records(batches: list[list[Record]], fields: list[str]) -> No
 def test_empty_batches() -> None:
     for batch in (SampleBatch(), _native.Tracker().update_many(RecordBatch())):
         for fields in [*FIELD_SETS, ([],)]:  # an unhashable field is never looked up
-            assert batch.series(fields) == [] == sample_series(list(batch), fields)
+            assert batch.series(fields) == [] == SampleSequence(list(batch)).series(fields)
     # records that change nothing (requests and errors only): samples none of the fields has
     batch = LiveCan().feed(lv.items_of(lv.realistic(200)))
     got = _native.Tracker().update_many(batch)
     assert len(got) > 0
-    assert got.series(("frames", "nope")) == [] == sample_series(list(got), ("frames", "nope"))
+    assert (
+        got.series(("frames", "nope")) == [] == SampleSequence(list(got)).series(("frames", "nope"))
+    )
 
 
 def test_unhashable_field_raises_as_python() -> None:
     got = _native.Tracker().update_many(lv.sample_batch(40)[0])
     for fields in ((["opening"],), ("opening", {}), (Name("x"), set())):
         with pytest.raises(TypeError, match="unhashable"):
-            sample_series(list(got), fields)
+            SampleSequence(list(got)).series(fields)
         with pytest.raises(TypeError, match="unhashable"):
             got.series(fields)
     with pytest.raises(TypeError):
-        got.series(["opening"])  # a tuple, as sample_series passes
+        got.series(["opening"])  # a tuple, as the Rerun listener passes
 
 
 def test_series_do_not_materialize() -> None:

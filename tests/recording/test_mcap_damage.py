@@ -23,6 +23,7 @@ from analyzer.recording.reader import (
 )
 from analyzer.recording.recorder import McapRecorder
 from analyzer.recording.recovery import Recording
+from analyzer.session.batches import RecordSequence
 from decoders.model import CanFrame, Chunk, Record
 
 T0 = 1_763_700_000.0
@@ -61,7 +62,7 @@ def write(rec: McapRecorder, items: list[Item]) -> None:
         rec.on_raw(part)
         if k % 40 == 0:
             t = part[0].payload.t or 0
-            rec.on_records([note(k, t)])
+            rec.on_records(RecordSequence([note(k, t)]))
             rec.on_event(SourceEvent(t, "can0", INFO, f"e{k}", "info"))
         rec.tick(0.0)
 

@@ -24,6 +24,7 @@ from analyzer.recording.reader import (
     read_states,
 )
 from analyzer.recording.recorder import McapRecorder
+from analyzer.session.batches import RecordSequence, SampleSequence
 from analyzer.session.listener import Listener, make_listener
 from analyzer.session.session import Session
 from analyzer.session.stage import Decoding
@@ -117,8 +118,8 @@ def recorded(tmp_path: Path) -> Path:
     path = tmp_path / "run.mcap"
     with McapRecorder(path, META) as rec:
         rec.on_raw(sample_items())
-        rec.on_records(sample_records())
-        rec.on_states(sample_states())
+        rec.on_records(RecordSequence(sample_records()))
+        rec.on_states(SampleSequence(sample_states()))
         rec.on_event(SourceEvent(T0 + 0.02, "can0", WARNING, "dropped 3 frames", "drops"))
         rec.on_event(SourceEvent(T0 + 0.03, "ttyUSB0", INFO, "port reopened", "reopened", 7))
         rec.write_mark(T0 + 0.04, "gripper slipped", 11)
@@ -371,8 +372,8 @@ def test_closed_recorder_refuses_writes(tmp_path: Path) -> None:
     rec.close()  # twice is fine
     for call in (
         lambda: rec.on_raw(sample_items()),
-        lambda: rec.on_records(sample_records()),
-        lambda: rec.on_states(sample_states()),
+        lambda: rec.on_records(RecordSequence(sample_records())),
+        lambda: rec.on_states(SampleSequence(sample_states())),
         lambda: rec.on_event(SourceEvent(T0, "can0", INFO, "x")),
         lambda: rec.write_mark(T0, "x"),
     ):

@@ -16,8 +16,7 @@ from mcap_checks import assert_time_ordered, mcap_messages
 from analyzer.model import INFO, WARNING, Item, SourceEvent
 from analyzer.recording.reader import McapCaptureReader, read_records
 from analyzer.recording.recorder import McapRecorder
-from analyzer.session.stage import Decoding
-from analyzer.session.tracker import Tracker
+from analyzer.session.batches import PythonDecoding, PythonTracker, RecordSequence
 from decoders import build as b
 from decoders.model import CanFrame, Chunk
 
@@ -43,12 +42,12 @@ def jittered_traffic(n: int, seed: int = 5) -> list[Item]:
 
 def record_session(path: Path, items: list[Item], batch: int = 40, **kw: object) -> None:
     """What a session does: per batch, raw input, records, state samples, events, a tick."""
-    decoding, tracker = Decoding(), Tracker()
+    decoding, tracker = PythonDecoding(), PythonTracker()
     with McapRecorder(path, {}, **kw) as rec:  # type: ignore[arg-type]
         for k in range(0, len(items), batch):
             part = items[k : k + batch]
             rec.on_raw(part)
-            records = [r for item in part for r in decoding.feed(item)]
+            records = RecordSequence(r for item in part for r in decoding.feed(item))
             rec.on_records(records)
             rec.on_states(tracker.update_many(records))
             if k % (5 * batch) == 0:
@@ -138,13 +137,13 @@ def test_late_records_keep_their_time_in_the_message(tmp_path: Path) -> None:
     path = tmp_path / "late.mcap"
     request = Item("can0", b.can_read_request(1, 1120, 8, t=T0))
     later = [Item("can0", b.can_read_request(2, 1120, 8, t=T0 + 1 + k * 0.01)) for k in range(3)]
-    decoding = Decoding()
+    decoding = PythonDecoding()
     with McapRecorder(path, {}) as rec:
         rec.on_raw([request])
-        rec.on_records(decoding.feed(request))
+        rec.on_records(RecordSequence(decoding.feed(request)))
         rec.tick(0.0)
         rec.on_raw(later)
-        rec.on_records([r for item in later for r in decoding.feed(item)])
+        rec.on_records(RecordSequence(r for item in later for r in decoding.feed(item)))
         rec.tick(0.0)
         rec.on_records(decoding.finish())
     assert_time_ordered(path)

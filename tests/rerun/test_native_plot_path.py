@@ -22,7 +22,7 @@ from analyzer.cli import main
 from analyzer.plot.listener import RerunListener
 from analyzer.plot.logs import log_rows
 from analyzer.session import engine as native
-from analyzer.session.batches import native_session_available, records_jsonl
+from analyzer.session.batches import RecordSequence, native_session_available
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 
@@ -87,7 +87,7 @@ def test_native_frames_give_the_python_readers_records_and_damage(
     session, reader = session_of(path, "native", native_)
     assert session.source.frames is not None  # read by the native core
     assert py_session.source.frames is None
-    assert records_jsonl(native_.records) == records_jsonl(python.records)
+    assert RecordSequence(native_.records).jsonl() == RecordSequence(python.records).jsonl()
     assert session.counts.items == py_session.counts.items
     assert reader.errors == py_reader.errors
     assert reader.position == reader.size
@@ -104,7 +104,7 @@ def test_a_listener_that_wants_raw_items_gets_them_from_the_python_reader(
     assert session.source.frames is None
     plain = Collector()
     session_of(CAPTURES / "can_pick_place.log", "native", plain)
-    assert records_jsonl(raw.records) == records_jsonl(plain.records)
+    assert RecordSequence(raw.records).jsonl() == RecordSequence(plain.records).jsonl()
 
 
 def without_nan(rows: dict[Any, Any]) -> dict[Any, Any]:
@@ -136,7 +136,7 @@ def test_log_rows_of_a_native_batch_equal_the_reference(tmp_path: Path, name: st
     shown = 0
     for batch in got.batches:
         buses, grippers = log_rows(batch)
-        want_buses, want_grippers = log_rows(list(batch))  # the records as objects
+        want_buses, want_grippers = log_rows(RecordSequence(batch))  # the records as objects
         assert list(buses) == list(want_buses)  # the same keys, in the same order
         assert list(grippers) == list(want_grippers)
         assert without_nan(buses) == without_nan(want_buses)
@@ -150,7 +150,7 @@ def test_every_command_of_the_warning_capture_is_in_the_logs(tmp_path: Path) -> 
     polls) are in their gripper's log, at WARN when flagged."""
     collected = Collector()
     session_of(warnings_log(tmp_path), "native", collected)
-    buses, grippers = log_rows(collected.records)
+    buses, grippers = log_rows(RecordSequence(collected.records))
     requests = [r for r in collected.records if r.direction == "request"]
     warned = [r for r in collected.records if r.warnings and not r.errors]
     _, seq, text, level = buses["can0"][:4]

@@ -23,7 +23,7 @@ from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 from analyzer.model import StateSample
 from analyzer.plot.blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
 from analyzer.plot.listener import RerunListener
-from analyzer.session.batches import native_session_available
+from analyzer.session.batches import RecordSequence, SampleSequence, native_session_available
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import make_listener
 from analyzer.session.session import live_session
@@ -601,12 +601,14 @@ def test_a_sample_with_a_value_that_is_not_a_number_is_plotted_field_by_field(
     value) or not a number goes field by field: nothing lost, nothing invented."""
     listener = RerunListener(str(tmp_path / "odd.rrd"))
     listener.on_states(
-        [
-            sample(1, force=10, opening=500, state=4),
-            sample(2, force=None, opening=510, state=4),
-            sample(3, force=12, opening=520, state="closing"),
-            sample(4, force=13, opening=530, state=6),
-        ]
+        SampleSequence(
+            [
+                sample(1, force=10, opening=500, state=4),
+                sample(2, force=None, opening=510, state=4),
+                sample(3, force=12, opening=520, state="closing"),
+                sample(4, force=13, opening=530, state=6),
+            ]
+        )
     )
     listener.close()
     rrd = read_rrd(tmp_path / "odd.rrd")
@@ -634,15 +636,15 @@ def test_a_live_listener_flushes_on_its_timer_while_the_session_is_busy(tmp_path
         flush(final)
 
     listener.flush = counted  # type: ignore[method-assign]
-    listener.on_states([sample(1, force=10)])
+    listener.on_states(SampleSequence([sample(1, force=10)]))
     deadline = time.monotonic() + 5
     while not flushes and time.monotonic() < deadline:
         time.sleep(0.01)
     assert flushes == ["rerun-flush"]
-    listener.on_records([])  # a batch's records: its samples come next
+    listener.on_records(RecordSequence())  # a batch's records: its samples come next
     time.sleep(0.3)
     assert flushes == ["rerun-flush"]  # due, but the batch is not complete
-    listener.on_states([sample(2, force=11)])
+    listener.on_states(SampleSequence([sample(2, force=11)]))
     deadline = time.monotonic() + 5
     while len(flushes) < 2 and time.monotonic() < deadline:
         time.sleep(0.01)

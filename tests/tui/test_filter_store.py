@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 from conftest import CAPTURES
 
+from analyzer.session.batches import RecordSequence
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 from analyzer.tui.aggregates import HISTOGRAM_BINS, Aggregates, latency_stats
@@ -31,8 +32,8 @@ def decoded(name: str) -> list[Record]:
 
 
 @pytest.fixture(scope="module")
-def records() -> list[Record]:
-    return (
+def records() -> RecordSequence:
+    return RecordSequence(
         decoded("can_pick_place.log")
         + decoded("serial_session.bin")
         + decoded("modbus_session.bin")
@@ -43,7 +44,7 @@ def records() -> list[Record]:
 def store(records: list[Record]) -> RecordStore:
     s = RecordStore()
     for k in range(0, len(records), 7):  # uneven batches across block boundaries
-        s.append(records[k : k + 7])
+        s.append(RecordSequence(records[k : k + 7]))
     return s
 
 
@@ -159,7 +160,7 @@ def test_latency_panels_follow_batches_split_anywhere(records: list[Record]) -> 
     expected = whole.snapshot()
     pieces = Aggregates()
     for k in range(0, len(records), 5):
-        pieces.add(records[k : k + 5], k)
+        pieces.add(RecordSequence(records[k : k + 5]), k)
         if k % 15 == 0:
             pieces.snapshot()
     got = pieces.snapshot()

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 
 from analyzer.model import Item
-from analyzer.session.stage import Decoding
+from analyzer.session.batches import PythonDecoding
 from analyzer.session.timeorder import TimeMerge
 from decoders import build as b
 from decoders.eg2_serial import Cmd
@@ -33,7 +33,7 @@ def serial_items(frame_t: float, split: float) -> list[Item]:
 
 def run(merge: TimeMerge, batches: list[list[Item]]) -> list[Record]:
     """The batches through a real decoding and the merge, as the TUI's feed runs them."""
-    decoding = Decoding(per_bus={"rs232": EG2_SERIAL})
+    decoding = PythonDecoding(per_bus={"rs232": EG2_SERIAL})
     out: list[Record] = []
     for items in batches:
         merge.hear(items)
@@ -63,7 +63,7 @@ def test_records_wait_for_a_bus_heard_but_not_yet_decoded() -> None:
     merge.hear([serial[0]])
     can = can_items([2.010, 2.020])
     merge.hear(can)
-    decoding = Decoding(per_bus={"rs232": EG2_SERIAL})
+    decoding = PythonDecoding(per_bus={"rs232": EG2_SERIAL})
     assert merge.push(decoding.feed_items([serial[0]])) == []
     assert merge.push(decoding.feed_items(can)) == []  # held: the serial frame began first
     merge.hear([serial[1]])
@@ -73,7 +73,7 @@ def test_records_wait_for_a_bus_heard_but_not_yet_decoded() -> None:
 
 def test_a_quiet_bus_holds_nobody_back() -> None:
     merge = TimeMerge(hold_s=2.0)
-    decoding = Decoding(per_bus={"rs232": EG2_SERIAL})
+    decoding = PythonDecoding(per_bus={"rs232": EG2_SERIAL})
     first = [Item("rs232", Chunk(serial_frame(), 10.0))]
     merge.hear(first)
     assert len(merge.push(decoding.feed_items(first))) == 1
@@ -88,7 +88,7 @@ def test_a_quiet_bus_holds_nobody_back() -> None:
 
 def test_live_sessions_release_by_the_wall_clock() -> None:
     merge = TimeMerge(hold_s=0.3)
-    decoding = Decoding(per_bus={"rs232": EG2_SERIAL})
+    decoding = PythonDecoding(per_bus={"rs232": EG2_SERIAL})
     serial = [Item("rs232", Chunk(serial_frame(), 100.0))]
     can = can_items([100.1])
     merge.hear(serial + can)
@@ -99,7 +99,7 @@ def test_live_sessions_release_by_the_wall_clock() -> None:
 
 def test_one_bus_is_handed_through_as_it_comes() -> None:
     merge = TimeMerge()
-    decoding = Decoding()
+    decoding = PythonDecoding()
     items = can_items([3.0, 2.0, 4.0])  # a clock that steps back stays in stream order
     merge.hear(items)
     records = decoding.feed_items(items)
@@ -120,7 +120,7 @@ def test_each_bus_keeps_its_stream_order_when_its_clock_steps_back() -> None:
 
 def test_at_most_max_held_records_wait() -> None:
     merge = TimeMerge(max_held=10)
-    decoding = Decoding(per_bus={"rs232": EG2_SERIAL})
+    decoding = PythonDecoding(per_bus={"rs232": EG2_SERIAL})
     serial = serial_items(0.0, math.nextafter(0.0, 1.0))
     merge.hear([serial[0]])
     merge.push(decoding.feed_items([serial[0]]))

@@ -19,6 +19,7 @@ from textual.widgets import Input, RichLog, Static
 from textual.widgets._footer import FooterKey
 
 from analyzer.commands.tui import finish, summary_line
+from analyzer.session.batches import RecordSequence
 from analyzer.session.capture import CaptureOptions, open_reader
 from analyzer.session.session import Session, SessionOptions
 from analyzer.sim.rig import DemoRig
@@ -220,7 +221,7 @@ def test_devices_never_read_show_a_dash_and_the_help_explains_the_gutter() -> No
 def test_latency_figures_say_how_many_answers_they_are_of() -> None:
     agg = Aggregates()
     n = LATENCY_KEEP + 500
-    records = []
+    records = RecordSequence()
     for k in range(n):
         for direction, latency in ((REQUEST, None), (RESPONSE, 1.0 + k % 7)):
             records.append(
@@ -245,7 +246,7 @@ def test_latency_figures_say_how_many_answers_they_are_of() -> None:
     # a response without a manual name is listed under its protocol, as the frame list does
     unnamed = Record(0.0, "can0", "eg2-can", "frame", 1, b"\x00", direction=RESPONSE, device=1)
     unnamed.latency_ms = 0.5
-    agg.add([unnamed], n * 2)
+    agg.add(RecordSequence([unnamed]), n * 2)
     assert set(agg.snapshot().latency_by_command) == {"CMD_FORCE_ACT..CMD_TEMP", "eg2-can"}
 
 

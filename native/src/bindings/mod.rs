@@ -1,5 +1,5 @@
 //! The Python extension module `analyzer._native` (built with the cargo feature `python` by
-//! setuptools-rust, see pyproject.toml). Python drives it from `analyzer/native.py`.
+//! setuptools-rust, see pyproject.toml). Python drives it from `analyzer/session/engine.py`.
 //!
 //! One class, `DecodeRun`: a decode of one capture file, iterated for `bytes` batches of
 //! output (about `batch_bytes` each) that Python writes to its output stream, or told to write
@@ -28,7 +28,7 @@ mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the 
 #[path = "python_live.rs"]
 mod python_live; // LiveCan, RecordBatch, can_raw_messages: the live CAN path (helper L)
 #[path = "python_rerun.rs"]
-mod python_rerun; // rerun_log_rows: what a plot's logs show of a RecordBatch
+mod python_rerun; // RecordBatch.rerun_log_rows: what a plot's logs show of a RecordBatch
 #[path = "python_tracker.rs"]
 mod python_tracker; // Tracker, SampleBatch: the live state tracker (helper K)
 
@@ -115,7 +115,7 @@ fn write_fd(fd: i32, data: &[u8]) -> io::Result<usize> {
     Ok(data.len())
 }
 
-/// Elsewhere Python writes the `bytes` batches itself (analyzer/native.py uses `write_batch`
+/// Elsewhere Python writes the `bytes` batches itself (analyzer/session/native_run.py uses `write_batch`
 /// on POSIX only).
 #[cfg(not(unix))]
 fn write_fd(_fd: i32, _data: &[u8]) -> io::Result<usize> {
@@ -397,7 +397,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     python_frames::register(m)?;
     python_live::register(m)?;
     python_tracker::register(m)?;
-    python_rerun::register(m)?;
     m.add("Unsupported", m.py().get_type::<Unsupported>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("FORMATS", ("jsonl", "csv", "text"))?;

@@ -559,6 +559,45 @@ impl RecordBatch {
         })?;
         PyList::new(py, values)
     }
+
+    /// The records at `indexes`, in that order, as a new batch (`RecordSequence.take`): the
+    /// Records already made are shared, the others are still made only when read.
+    fn take(&self, py: Python<'_>, indexes: Vec<usize>) -> PyResult<RecordBatch> {
+        let mut records = Vec::with_capacity(indexes.len());
+        let mut objects = Vec::new();
+        for &i in &indexes {
+            let Some(rec) = self.records.get(i) else {
+                return Err(PyIndexError::new_err("RecordBatch index out of range"));
+            };
+            records.push(rec.clone());
+            if !self.objects.is_empty() {
+                objects.push(self.objects[i].as_ref().map(|o| o.clone_ref(py)));
+            }
+        }
+        Ok(RecordBatch { records, objects })
+    }
+
+    /// The records as JSONL lines, as `decode --format jsonl` writes them (each of
+    /// `messages()` and a newline).
+    fn jsonl<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        let mut writer = JsonlWriter::default();
+        let mut out = Vec::with_capacity(self.records.len() * 256);
+        for rec in &self.records {
+            writer.write(rec, &mut out);
+        }
+        PyBytes::new(py, &out)
+    }
+
+    /// What `eg2scope plot`'s logs show of the records (python_rerun.rs): `polls`, the
+    /// (protocol, code) of requests that only read; `quiet`, flags that say nothing is wrong.
+    fn rerun_log_rows<'py>(
+        slf: PyRef<'py, Self>,
+        polls: Vec<(String, i64)>,
+        quiet: Vec<String>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        super::python_rerun::rerun_log_rows(py, slf, polls, quiet)
+    }
 }
 
 /// The iterator of a RecordBatch (by index, as a list's: records appended meanwhile are seen

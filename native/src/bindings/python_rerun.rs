@@ -1,5 +1,5 @@
 //! `rerun_log_rows(batch, polls, quiet)`: what `eg2scope plot`'s logs show of a `RecordBatch`,
-//! gathered per bus and per gripper in one pass over the Rust records (analyzer/rerun_logs.py
+//! gathered per bus and per gripper in one pass over the Rust records (analyzer/plot/logs.py
 //! `log_rows`, the reference, does the same on a list of Records; tests/rerun require equal
 //! results). A warning-heavy capture shows most of its records in the logs: reading them
 //! here makes no Python Record per record, only the columns the plot sends.
@@ -127,8 +127,7 @@ fn command_text(rec: &Record) -> Option<String> {
 /// and `{(bus, device): (t, seq, text, level, mark_t, mark_seq)}` (its commands and fault
 /// marks), each in the order first met. `polls`: the (protocol, code) of requests that only
 /// read; `quiet`: flags that say nothing is wrong.
-#[pyfunction]
-pub fn rerun_log_rows<'py>(
+pub(super) fn rerun_log_rows<'py>(
     py: Python<'py>,
     records: PyRef<'py, RecordBatch>,
     polls: Vec<(String, i64)>,
@@ -239,8 +238,4 @@ pub fn rerun_log_rows<'py>(
         out_grippers.set_item(key, row)?;
     }
     PyTuple::new(py, [out_buses.into_any(), out_grippers.into_any()])
-}
-
-pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(rerun_log_rows, m)?)
 }

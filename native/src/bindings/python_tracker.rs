@@ -1,4 +1,4 @@
-//! `analyzer._native.Tracker` and `SampleBatch`: analyzer/tracker.py's `Tracker` folding the
+//! `analyzer._native.Tracker` and `SampleBatch`: analyzer/session/tracker.py's `Tracker` folding the
 //! records of a `RecordBatch` (python_live.rs) in Rust (tracker.rs), its samples kept in Rust
 //! until asked for.
 //!
@@ -7,9 +7,9 @@
 //! object per sample: `messages()` (each sample's JSON, byte-identical to
 //! `orjson.dumps(sample.to_dict(), default=json_default)`), `times()`, `keys()`, `column(name)`
 //! (any attribute, as `[getattr(s, name) for s in batch]`; tests/native/test_batch_columns.py),
-//! `series(fields)` (analyzer/batches.py `sample_series`: the values of some fields grouped by
+//! `series(fields)` (analyzer/session/batches.py `SampleSequence.series`: the values of some fields grouped by
 //! gripper, what the Rerun listener plots; tests/native/test_sample_series.py).
-//! `Tracker.states` builds fresh `analyzer.tracker.DeviceState` objects equal to the Python
+//! `Tracker.states` builds fresh `analyzer.session.tracker.DeviceState` objects equal to the Python
 //! tracker's.
 //!
 //! A child module of python.rs.
@@ -196,7 +196,7 @@ impl PyTracker {
     }
 
     /// Every gripper heard, by (bus, device), in the order first heard: fresh
-    /// `analyzer.tracker.DeviceState` objects.
+    /// `analyzer.session.tracker.DeviceState` objects.
     #[getter]
     fn states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let states = self.tracker().states().to_vec(); // unlocked before Python runs
@@ -428,7 +428,7 @@ impl SampleBatch {
         }
     }
 
-    /// `analyzer.batches.sample_series(list(batch), fields)`, read from the samples (no
+    /// `analyzer.batches.SampleSequence(batch).series(fields)`, read from the samples (no
     /// StateSample is made): the samples that changed any of `fields`, grouped by (bus,
     /// device, names), `names` the fields among `fields` the sample changed, in `fields` order
     /// (a field given twice is named and filled twice, as there); per group
