@@ -16,7 +16,7 @@
 //! (an int `t` would stay an int and be written `5`, not `5.0`); rather than differ silently
 //! the native path raises TypeError (or OverflowError) before decoding any item of the call.
 //!
-//! A child module of python.rs (helper K's tracker, a sibling, reads `RecordBatch::records`).
+//! A child module of bindings/mod.rs (python_tracker.rs, a sibling, reads `RecordBatch::records`).
 
 use super::python_frames::FrameBatch;
 use crate::decoders::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
