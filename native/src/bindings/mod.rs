@@ -21,15 +21,10 @@ use pyo3::types::PyBytes;
 use std::io;
 use std::path::PathBuf;
 
-#[path = "python_arrow.rs"]
 mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output
-#[path = "python_frames.rs"]
 mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the native session
-#[path = "python_live.rs"]
 mod python_live; // CanStage, RecordBatch, can_raw_messages: the live CAN path
-#[path = "python_rerun.rs"]
 mod python_rerun; // RecordBatch.rerun_log_rows: what a plot's logs show of a RecordBatch
-#[path = "python_tracker.rs"]
 mod python_tracker; // Tracker, SampleBatch: the live state tracker
 
 create_exception!(
