@@ -22,7 +22,7 @@ CORE_API = (
     "ArrowRun",
     "Unsupported",
     "CandumpFrames",
-    "LiveCan",
+    "CanStage",
     "Tracker",
     "RecordBatch.column",
     "RecordBatch.error_count",

@@ -1,7 +1,7 @@
 """What listeners are handed: records and state samples as sequences with bulk methods, one
 kind per engine (the engine is chosen here, ``session_engine``).
 
-A session on CAN input with the native core built decodes with ``_native.LiveCan`` and tracks
+A session on CAN input with the native core built decodes with ``_native.CanStage`` and tracks
 with ``_native.Tracker``; the same records and samples as ``stage.Decoding`` and
 ``tracker.Tracker`` (tests/native/test_live_native.py and test_tracker_native.py require it)
 come as a ``RecordBatch`` and a ``SampleBatch``, whose items become Python objects only when
@@ -76,7 +76,7 @@ def session_engine(
 
 class PythonDecoding(Decoding):
     """``pipeline.Decoding`` handing out its records as ``RecordSequence``s, the Python kind of
-    what the native ``LiveCan`` hands out (``RecordBatch``es)."""
+    what the native ``CanStage`` hands out (``RecordBatch``es)."""
 
     def feed_items(self, items: list[Any]) -> RecordSequence:
         return RecordSequence(super().feed_items(items))
@@ -106,10 +106,10 @@ class PythonTracker(Tracker):
 
 
 class NativeCanDecoding:
-    """``SessionDecoding`` over ``_native.LiveCan``: CAN frames in, a ``RecordBatch`` out."""
+    """``SessionDecoding`` over ``_native.CanStage``: CAN frames in, a ``RecordBatch`` out."""
 
     def __init__(self, positional: bool) -> None:
-        core = _native.LiveCan(positional)  # type: ignore[union-attr]
+        core = _native.CanStage(positional)  # type: ignore[union-attr]
         self.feed_items = core.feed
         self.tick = core.tick
         self.gap = core.gap

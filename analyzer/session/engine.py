@@ -94,7 +94,7 @@ def ineligible(reader: CaptureReader, fmt: str, speed: float | None, device: int
 def candump_frames(reader: CaptureReader) -> Any:
     """The frames of ``reader``'s capture as the native core reads them for a session
     (``_native.CandumpFrames``: the reader ``decode`` uses, batches of frames that the native
-    ``LiveCan`` decodes with no Python object per frame), or None: the Python reader reads it
+    ``CanStage`` decodes with no Python object per frame), or None: the Python reader reads it
     (not a candump log on a regular file, or the core does not read it)."""
     if ineligible(reader, "jsonl", None, None):
         return None

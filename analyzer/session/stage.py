@@ -65,7 +65,7 @@ class Decoding:
 
     def feed_items(self, items: list[Item]) -> list[Record]:
         """The records of a run of items (``feed`` for each, concatenated): the session's call,
-        which the native core's ``LiveCan.feed`` answers for CAN input."""
+        which the native core's ``CanStage.feed`` answers for CAN input."""
         feed = self.feed
         records: list[Record] = []
         for item in items:

@@ -35,7 +35,7 @@ from rrd_helpers import Rrd, read_rrd
 __all__ = ["Rrd", "read_rrd"]
 
 NO_NATIVE_DECODE = "the native core is not built (eg2scope --version says why)"
-NO_NATIVE_SESSION = "the native core's session classes (LiveCan, Tracker) are not built"
+NO_NATIVE_SESSION = "the native core's session classes (CanStage, Tracker) are not built"
 
 
 def skip_unless_native(session: bool = False) -> None:

@@ -44,7 +44,7 @@ import test_live_native as lv  # noqa: E402
 import test_tracker_native as tt  # noqa: E402
 
 RecordBatch = _native.RecordBatch
-LiveCan = _native.LiveCan
+CanStage = _native.CanStage
 
 RECORD_ATTRS = [f.name for f in dataclasses.fields(Record)]
 SAMPLE_ATTRS = [f.name for f in dataclasses.fields(StateSample)]
@@ -127,10 +127,10 @@ def check_sample_columns(batch: Any, want: Sequence[StateSample] | None, where: 
 
 
 def run_both(steps: list[lv.Step], positional: bool = False, can_index: int = 0) -> Any:
-    """The steps through Decoding and LiveCan, the columns of every step's batch checked; the
+    """The steps through Decoding and CanStage, the columns of every step's batch checked; the
     batches joined with += (checked too) and returned."""
     dec = Decoding(positional_seq=positional, can_index=can_index)
-    live = LiveCan(positional, can_index)
+    live = CanStage(positional, can_index)
     everything: list[Record] = []
     joined = RecordBatch()
     for n, step in enumerate(steps):
@@ -208,7 +208,7 @@ def test_unknown_names() -> None:
 
 
 def test_empty_batches() -> None:
-    for batch in (RecordBatch(), LiveCan().finish(), LiveCan().feed([])):
+    for batch in (RecordBatch(), CanStage().finish(), CanStage().feed([])):
         for name in RECORD_ATTRS:
             assert batch.column(name) == [], name
 
@@ -239,7 +239,7 @@ def records_in_memory() -> int:
 def test_columns_do_not_materialize() -> None:
     """No Record object is made (Records are tracked by the garbage collector, so every live
     one is counted); materializing afterwards still gives one object per index."""
-    batch = LiveCan().feed(lv.items_of(lv.realistic(500)))
+    batch = CanStage().feed(lv.items_of(lv.realistic(500)))
     before = records_in_memory()
     columns = {name: batch.column(name) for name in RECORD_ATTRS}
     assert records_in_memory() == before
@@ -267,12 +267,12 @@ def test_columns_describe_the_records_as_decoded() -> None:
 
 @pytest.mark.parametrize("samples", [True, False])
 def test_live_can_samples(samples: bool) -> None:
-    """LiveCan + the native Tracker against Decoding + Tracker, batch by batch, on the tracker
+    """CanStage + the native Tracker against Decoding + Tracker, batch by batch, on the tracker
     tests' CAN traffic (three buses, many grippers, out-of-range readings, error frames, frames
     without times, requests never answered)."""
     rng = random.Random(5)
     items: list[Item] = list(tt.can_items(5000, 5))
-    decoding, live = Decoding(), LiveCan()
+    decoding, live = Decoding(), CanStage()
     py, nat = Tracker(samples=samples), _native.Tracker(samples=samples)
     joined = RecordBatch()
     i = made = 0
@@ -381,7 +381,7 @@ def test_sample_names_and_empty() -> None:
 
 
 def test_sample_columns_do_not_materialize() -> None:
-    batch = LiveCan().feed(lv.items_of(lv.realistic(500)))
+    batch = CanStage().feed(lv.items_of(lv.realistic(500)))
     got = _native.Tracker().update_many(batch)
 
     def samples_in_memory() -> int:
@@ -399,7 +399,7 @@ def test_sample_columns_do_not_materialize() -> None:
 
 def test_the_records_tracked_are_the_columns() -> None:
     """A sample's t, bus, device and seq are its record's (the columns of both batches agree)."""
-    batch = LiveCan().feed(lv.items_of(lv.realistic(300), ("can0", "can1")))
+    batch = CanStage().feed(lv.items_of(lv.realistic(300), ("can0", "can1")))
     got = _native.Tracker().update_many(batch)
     by_seq = dict(zip(batch.column("seq"), range(len(batch)), strict=True))
     rows = [by_seq[s] for s in got.column("seq")]

@@ -18,7 +18,7 @@ CARGO = shutil.which("cargo")
 NO_CARGO_PATH = str(Path(sys.executable).parent)
 
 HIDE_CORE = "sys.modules['analyzer._native'] = None"  # its import fails: as if never built
-CUT_CORE = "import analyzer._native as core; del core.LiveCan"  # as if built from an older crate
+CUT_CORE = "import analyzer._native as core; del core.CanStage"  # as if built from an older crate
 
 # one module that checks at its top, one test that checks in its fixture
 MODULE = "tests/native/test_native_differential.py"
@@ -54,7 +54,7 @@ def test_a_missing_core_fails_where_cargo_is(target: str) -> None:
 def test_an_incomplete_core_fails_where_cargo_is(target: str) -> None:
     ran = pytest_run(CUT_CORE, with_cargo(), target)
     assert ran.returncode not in (0, 5), ran.stdout
-    assert "the native core lacks LiveCan (built from an older crate?)" in ran.stdout
+    assert "the native core lacks CanStage (built from an older crate?)" in ran.stdout
     assert "yet cargo is on the PATH" in ran.stdout
 
 

@@ -1,8 +1,8 @@
-"""The native live CAN path (``analyzer._native.LiveCan``, ``RecordBatch``,
+"""The native live CAN path (``analyzer._native.CanStage``, ``RecordBatch``,
 ``can_raw_messages``) against the Python one it stands in for.
 
 The same Items, ticks, gaps and end go through ``analyzer.session.stage.Decoding`` and through
-``LiveCan``; after every step both must give the same records: the materialized objects compare
+``CanStage``; after every step both must give the same records: the materialized objects compare
 == to the Python's (and have the same types, down to the JSON of their fields), and the batch's
 bulk methods (``messages``, ``times``, ``buses``, ``error_count``, ``problems``) say what the
 Python records say, the JSON byte for byte (``orjson.dumps(rec.to_dict(),
@@ -40,7 +40,7 @@ if why := why_not():
     skip_or_fail(why)
 
 import native_corpus as corpus  # after the check (tests/native is on sys.path)
-from analyzer._native import LiveCan, RecordBatch, can_raw_messages
+from analyzer._native import CanStage, RecordBatch, can_raw_messages
 
 from analyzer.recording.layout import raw_message
 from analyzer.session.batches import json_message
@@ -117,7 +117,7 @@ def run_both(
     """Every step through both; the records of each step compared; all of them returned
     (Python's list, and the native batches joined with +=)."""
     dec = Decoding(positional_seq=positional, can_index=can_index)
-    live = LiveCan(positional, can_index)
+    live = CanStage(positional, can_index)
     assert live.can_index == can_index
     everything: list[Record] = []
     joined = RecordBatch()
@@ -493,7 +493,7 @@ def test_raw_messages() -> None:
 
 
 def test_refused_items_decode_nothing() -> None:
-    live = LiveCan()
+    live = CanStage()
     good = items_of(realistic(10))
     bad: list[Any] = [
         Item("serial", Chunk(b"\x01\x02", T0)),
@@ -523,7 +523,7 @@ def test_refused_items_decode_nothing() -> None:
 
 def sample_batch(n: int = 40) -> tuple[RecordBatch, list[Record]]:
     frames = realistic(n)
-    live, dec = LiveCan(), Decoding()
+    live, dec = CanStage(), Decoding()
     items = items_of(frames)
     batch = live.feed(items)
     batch += live.finish()

@@ -5,7 +5,7 @@ The groups must be equal with identical types, recursively (an int is not a floa
 ``-0.0`` is not ``0.0``, a list is not a tuple): the same groups in the same order, the same
 names, times, seqs and values. Samples come from the generators of the other native tests:
 realistic CAN traffic with what real buses add, hostile frames, Hypothesis sessions through
-``LiveCan`` and the native Tracker, Modbus and serial records and Hypothesis records with lists,
+``CanStage`` and the native Tracker, Modbus and serial records and Hypothesis records with lists,
 dicts and signed zeros as values (``Tracker._update_records``); and also against the Python
 tracker's samples of the same records. Field tuples: what the Rerun listener plots, none,
 unknown names, counters (never changed), duplicates, every field in both orders, str
@@ -44,7 +44,7 @@ import test_tracker_native as tt  # noqa: E402
 
 RecordBatch = _native.RecordBatch
 SampleBatch = _native.SampleBatch
-LiveCan = _native.LiveCan
+CanStage = _native.CanStage
 
 
 class Name(str):
@@ -92,7 +92,7 @@ def check(batch: Any, want: list[StateSample] | None = None, where: str = "") ->
     return n
 
 
-# -- CAN: LiveCan and the native Tracker ----------------------------------------------------------
+# -- CAN: CanStage and the native Tracker ----------------------------------------------------------
 
 
 @pytest.mark.parametrize("seed", [5, 6])
@@ -102,7 +102,7 @@ def test_live_can_traffic(seed: int) -> None:
     it joined with += through a new tracker."""
     rng = random.Random(seed)
     items = list(tt.can_items(6000, seed))
-    decoding, live = Decoding(), LiveCan()
+    decoding, live = Decoding(), CanStage()
     py, nat = Tracker(), _native.Tracker()
     joined = RecordBatch()
     i = groups = 0
@@ -134,7 +134,7 @@ def test_realistic_traffic_and_odd_frames() -> None:
         t += 1.5
     items = lv.items_of(frames, ("can0", "can1", "vcan2"), seed=4)
     steps = [*lv.batches(items, random.Random(7)), ("gap", "can1"), ("finish",)]
-    live, nat = LiveCan(), _native.Tracker()
+    live, nat = CanStage(), _native.Tracker()
     for step in steps:
         check(nat.update_many(lv.native_step(live, step)), where=step[0])
 
@@ -142,7 +142,7 @@ def test_realistic_traffic_and_odd_frames() -> None:
 def test_corpus_frames() -> None:
     _, mined, _ = lv.corpus.mined()
     frames = [f for f in mined if 0 <= f.arbitration_id < 1 << 32 and isinstance(f.t, float | None)]
-    batch = LiveCan().feed(lv.items_of(frames * 2, ("can0", "can1")))
+    batch = CanStage().feed(lv.items_of(frames * 2, ("can0", "can1")))
     check(_native.Tracker().update_many(batch))
 
 
@@ -150,7 +150,7 @@ def test_corpus_frames() -> None:
 @given(lv.sessions())
 def test_generated_sessions(session: tuple[list[lv.Step], bool, int]) -> None:
     steps, positional, can_index = session
-    live, nat = LiveCan(positional, can_index), _native.Tracker()
+    live, nat = CanStage(positional, can_index), _native.Tracker()
     joined = RecordBatch()
     for step in steps:
         batch = lv.native_step(live, step)
@@ -214,7 +214,7 @@ def test_empty_batches() -> None:
         for fields in [*FIELD_SETS, ([],)]:  # an unhashable field is never looked up
             assert batch.series(fields) == [] == SampleSequence(list(batch)).series(fields)
     # records that change nothing (requests and errors only): samples none of the fields has
-    batch = LiveCan().feed(lv.items_of(lv.realistic(200)))
+    batch = CanStage().feed(lv.items_of(lv.realistic(200)))
     got = _native.Tracker().update_many(batch)
     assert len(got) > 0
     assert (
@@ -236,7 +236,7 @@ def test_unhashable_field_raises_as_python() -> None:
 def test_series_do_not_materialize() -> None:
     """No StateSample object is made (they are tracked by the garbage collector, so every
     live one is counted); materializing afterwards still gives one object per index."""
-    got = _native.Tracker().update_many(LiveCan().feed(lv.items_of(lv.realistic(500))))
+    got = _native.Tracker().update_many(CanStage().feed(lv.items_of(lv.realistic(500))))
 
     def samples_in_memory() -> int:
         gc.collect()

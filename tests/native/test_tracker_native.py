@@ -11,7 +11,7 @@ writes of read-only registers, error frames, frames with no time, requests never
 pairer's ``unanswered`` flag); Modbus and serial traffic too (the Python tracker folds every
 protocol; so does the native one); and Hypothesis-made records with odd values. They reach the
 native tracker through ``Tracker._update_records`` (Python records converted field by field);
-when the core has ``LiveCan``, also as the ``RecordBatch`` of ``LiveCan.feed``.
+when the core has ``CanStage``, also as the ``RecordBatch`` of ``CanStage.feed``.
 Skipped when the extension is not built (or was built without the tracker).
 """
 
@@ -379,16 +379,16 @@ def test_generated_records(batches: list[list[Record]], samples: bool) -> None:
             )
 
 
-# -- the RecordBatch of LiveCan -------------------------------------------------------------------
+# -- the RecordBatch of CanStage -------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("samples", [True, False])
 def test_live_can_batches(samples: bool) -> None:
-    """Items through Decoding + Tracker against LiveCan + the native Tracker, batch by batch
+    """Items through Decoding + Tracker against CanStage + the native Tracker, batch by batch
     (with ticks and a gap), as a live session runs them."""
     rng = random.Random(5)
     items = list(can_items(8000, 5))
-    decoding, live = Decoding(), _native.LiveCan()
+    decoding, live = Decoding(), _native.CanStage()
     py, nat = Tracker(samples=samples), _native.Tracker(samples=samples)
     i = 0
     now = 0.0

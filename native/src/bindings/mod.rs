@@ -21,16 +21,11 @@ use pyo3::types::PyBytes;
 use std::io;
 use std::path::PathBuf;
 
-#[path = "python_arrow.rs"]
-mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output (helper N)
-#[path = "python_frames.rs"]
+mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output
 mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the native session
-#[path = "python_live.rs"]
-mod python_live; // LiveCan, RecordBatch, can_raw_messages: the live CAN path (helper L)
-#[path = "python_rerun.rs"]
+mod python_live; // CanStage, RecordBatch, can_raw_messages: the live CAN path
 mod python_rerun; // RecordBatch.rerun_log_rows: what a plot's logs show of a RecordBatch
-#[path = "python_tracker.rs"]
-mod python_tracker; // Tracker, SampleBatch: the live state tracker (helper K)
+mod python_tracker; // Tracker, SampleBatch: the live state tracker
 
 create_exception!(
     analyzer._native,
@@ -45,7 +40,7 @@ create_exception!(
 const BATCH_BYTES: usize = 256 << 10;
 
 /// Room for one batch: `next_batch` stops after the step that reaches the batch size, which
-/// adds at most about 150 KB (pipeline.rs `FEED_SLICE`, `CAN_STEP`): no regrowth.
+/// adds at most about 150 KB (session/offline_run.rs `FEED_SLICE`, `CAN_STEP`): no regrowth.
 fn batch_capacity(batch_bytes: usize) -> usize {
     batch_bytes + batch_bytes / 2 + (192 << 10)
 }

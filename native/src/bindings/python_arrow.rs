@@ -7,7 +7,7 @@
 //! batch to Parquet, the next one is decoded (two cores: the two halves of the work overlap).
 //! The run is opened in that thread and never leaves it; batches come over a channel of one.
 //!
-//! A child module of python.rs: it shares its errors, options and GIL helpers.
+//! A child module of bindings/mod.rs: it shares its errors, options and GIL helpers.
 
 use super::{os_error, protocol_by_name, Unsupported};
 use crate::parquet::records::{ArrowTables, ArrowWriter, Buffers, ColumnSpec, RecordColumns, Type};
@@ -84,7 +84,7 @@ pub(super) fn parts_to_py<'py>(py: Python<'py>, parts: Vec<Part>) -> PyResult<Bo
     Ok(list)
 }
 
-/// State samples as columns (arrow_states.rs), owned: `SampleBatch.arrow` and the fleet runs.
+/// State samples as columns (parquet/states.rs), owned: `SampleBatch.arrow` and the fleet runs.
 pub(super) fn state_parts(columns: &mut StateColumns) -> (usize, Vec<Part>) {
     let rows = columns.rows();
     let mut parts = Vec::new();
@@ -163,7 +163,7 @@ impl Buf {
 /// errors_only=False, batch_rows=16384, states=None)`: `columns` describes the parse schema
 /// depth first as `(name, type, number of children)` (type: int64, float64, string, bool, list,
 /// struct); `families`: `(protocol, column)` pairs; `other`: the column of what no column
-/// holds; `states`: the state sample columns (arrow_states.rs) to fill from a Tracker fed the
+/// holds; `states`: the state sample columns (parquet/states.rs) to fill from a Tracker fed the
 /// records, or None. Iterate it for `(rows, columns, states)`: per column of the description,
 /// its length (all null) or `(length, null_count, validity or None, values, bytes or None)`
 /// (buffer objects); `states` None, or `(samples, columns)` laid out the same way. A sample
@@ -212,7 +212,7 @@ fn produce(
         }
         if !more {
             // a read error that ended the input early ends the output there, as DecodeRun's
-            // batches do (python.rs); the damage is in `errors`
+            // batches do (bindings/mod.rs); the damage is in `errors`
             let _ = tx.send(Msg::End(run.errors().to_vec()));
             return;
         }
@@ -429,7 +429,7 @@ impl Drop for PyArrowRun {
     }
 }
 
-/// Add the classes to the module (python.rs's module init calls this).
+/// Add the classes to the module (bindings/mod.rs's module init calls this).
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyArrowRun>()?;
     m.add_class::<Buf>()

@@ -1,10 +1,10 @@
 //! A candump log's frames for a session that decodes them natively: `CandumpFrames` reads the
 //! file with the reader `DecodeRun` uses (candump.rs, named per channel as `CanLogReader`
-//! names buses) and hands over `FrameBatch`es, which `LiveCan.feed` decodes without a Python
+//! names buses) and hands over `FrameBatch`es, which `CanStage.feed` decodes without a Python
 //! object per frame (analyzer/sources/source.py `CaptureSource.read_natively`).
 //!
 //! A `FrameBatch` is opaque to Python (only its length): a session reads a capture this way
-//! only when no listener wants the raw items and its decoding is the native `LiveCan`.
+//! only when no listener wants the raw items and its decoding is the native `CanStage`.
 
 use crate::decoders::model::CanFrame;
 use crate::sources::candump::{BusNamer, CandumpReader};
@@ -12,7 +12,7 @@ use pyo3::prelude::*;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// Frames read, each with its bus name (one `Arc` per name: `LiveCan` finds its decoder by
+/// Frames read, each with its bus name (one `Arc` per name: `CanStage` finds its decoder by
 /// identity first).
 #[pyclass(module = "analyzer._native", frozen)]
 pub struct FrameBatch {

@@ -1,4 +1,4 @@
-//! The native live CAN path, for Python: `LiveCan` (analyzer/pipeline.py `Decoding`, CAN
+//! The native live CAN path, for Python: `CanStage` (analyzer/session/stage.py `Decoding`, CAN
 //! items only), `RecordBatch` (the records it gives, a lazy sequence of decoders/model.py
 //! `Record`) and `can_raw_messages` (analyzer/recording.py `McapRecorder.on_raw`'s JSON of
 //! CAN frames).
@@ -16,12 +16,12 @@
 //! (an int `t` would stay an int and be written `5`, not `5.0`); rather than differ silently
 //! the native path raises TypeError (or OverflowError) before decoding any item of the call.
 //!
-//! A child module of python.rs (helper K's tracker, a sibling, reads `RecordBatch::records`).
+//! A child module of bindings/mod.rs (python_tracker.rs, a sibling, reads `RecordBatch::records`).
 
 use super::python_frames::FrameBatch;
 use crate::decoders::model::{CanFrame, Record, SharedFields, Str, Value, EG2_CAN};
 use crate::hash::FastMap;
-use crate::session::can_stage::LiveCan as Core;
+use crate::session::can_stage::CanStage as Core;
 use crate::sinks::writers::{JsonlWriter, RecordWriter};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError};
 use pyo3::intern;
@@ -791,9 +791,9 @@ fn for_each_item<'py>(
 }
 
 // ---------------------------------------------------------------------------------------------
-// LiveCan
+// CanStage
 
-/// A frame read from an Item, waiting to be decoded (its data in `PyLiveCan::bytes`).
+/// A frame read from an Item, waiting to be decoded (its data in `PyCanStage::bytes`).
 struct Queued {
     bus: usize,
     t: Option<f64>,
@@ -806,9 +806,9 @@ struct Queued {
     data: std::ops::Range<usize>,
 }
 
-/// `LiveCan(positional=False, can_index=0)`: analyzer.pipeline.Decoding for CAN items.
-#[pyclass(name = "LiveCan", module = "analyzer._native")]
-struct PyLiveCan {
+/// `CanStage(positional=False, can_index=0)`: analyzer.session.stage.Decoding for CAN items.
+#[pyclass(name = "CanStage", module = "analyzer._native")]
+struct PyCanStage {
     core: Core,
     /// the bus str objects seen, with their decoder's number: a source names every frame of a
     /// bus with one object, so the number is found by identity (the object is held, its
@@ -819,7 +819,7 @@ struct PyLiveCan {
     frame: CanFrame,
 }
 
-impl PyLiveCan {
+impl PyCanStage {
     /// `feed` of frames read natively (python_frames.rs): no Python object to read.
     fn feed_frames(&mut self, py: Python<'_>, batch: &FrameBatch) -> RecordBatch {
         let core = &mut self.core;
@@ -878,11 +878,11 @@ fn decode_queue(
 }
 
 #[pymethods]
-impl PyLiveCan {
+impl PyCanStage {
     #[new]
     #[pyo3(signature = (positional=false, can_index=0))]
     fn new(positional: bool, can_index: u64) -> Self {
-        PyLiveCan {
+        PyCanStage {
             core: Core::new(positional, can_index),
             buses: Vec::new(),
             queue: Vec::new(),
@@ -903,7 +903,7 @@ impl PyLiveCan {
         let mut bytes = std::mem::take(&mut self.bytes);
         let mut queue = std::mem::take(&mut self.queue);
         let read = for_each_item(items, |item| {
-            let f = read_item(item, &mut bytes, false, "LiveCan.feed")?;
+            let f = read_item(item, &mut bytes, false, "CanStage.feed")?;
             queue.push(Queued {
                 bus: self.bus_id(&f.bus)?,
                 t: f.t,
@@ -1075,7 +1075,7 @@ fn can_raw_messages<'py>(
 /// `collections.abc.Sequence` (it behaves as one).
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RecordBatch>()?;
-    m.add_class::<PyLiveCan>()?;
+    m.add_class::<PyCanStage>()?;
     m.add_function(wrap_pyfunction!(can_raw_messages, m)?)?;
     let py = m.py();
     py.import("collections.abc")?

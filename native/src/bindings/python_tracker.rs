@@ -12,7 +12,7 @@
 //! `Tracker.states` builds fresh `analyzer.session.tracker.DeviceState` objects equal to the Python
 //! tracker's.
 //!
-//! A child module of python.rs.
+//! A child module of bindings/mod.rs.
 
 use super::python_arrow::{column_specs, parts_to_py, state_parts};
 use super::python_live::RecordBatch;
@@ -332,7 +332,7 @@ impl SampleBatch {
         PyList::new(py, out)
     }
 
-    /// The samples as Arrow columns (arrow_states.rs; `columns` described as `ArrowRun`'s
+    /// The samples as Arrow columns (parquet/states.rs; `columns` described as `ArrowRun`'s
     /// `states`): `(rows, columns)`, as `ArrowRun` hands out the states of a batch. ValueError
     /// for a value its column does not take.
     fn arrow<'py>(

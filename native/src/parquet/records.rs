@@ -873,7 +873,7 @@ impl ArrowTables {
     }
 }
 
-/// The pipeline's writer (writers.rs `RecordWriter`) that puts records into shared columns
+/// The pipeline's writer (sinks/writers.rs `RecordWriter`) that puts records into shared columns
 /// instead of bytes: the Python binding takes the columns out between batches.
 pub struct ArrowWriter(pub Arc<Mutex<ArrowTables>>);
 

@@ -1,4 +1,4 @@
-//! The live decoding of CAN frames: analyzer/pipeline.py `Decoding`, for sessions whose input
+//! The live decoding of CAN frames: analyzer/session/stage.py `Decoding`, for sessions whose input
 //! is CAN frames only (a CAN tap, a CAN capture replayed).
 //!
 //! The same stages as `Decoding.feed_can` / `_decode_can` / `tick` / `gap` / `finish`: one
@@ -18,7 +18,7 @@ use crate::decoders::pairing::Pairer;
 use std::sync::Arc;
 
 /// `Decoding` for CAN frames: frames in, records out in stream order.
-pub struct LiveCan {
+pub struct CanStage {
     /// by bus name, in the order first seen (`Decoding._can`)
     decoders: Vec<(Arc<str>, Eg2CanDecoder)>,
     /// one set of memos for every bus (a decode does not depend on the bus: offline_run.rs does
@@ -29,10 +29,10 @@ pub struct LiveCan {
     can_index: u64,
 }
 
-impl LiveCan {
+impl CanStage {
     /// `Decoding(positional_seq=positional, can_index=can_index)`.
     pub fn new(positional: bool, can_index: u64) -> Self {
-        LiveCan {
+        CanStage {
             decoders: Vec::new(),
             memos: CanMemos::default(),
             linter: TimingLinter::new(),
@@ -137,7 +137,7 @@ mod tests {
 
     #[test]
     fn pairs_across_frames_and_numbers_them() {
-        let mut live = LiveCan::new(false, 10);
+        let mut live = CanStage::new(false, 10);
         let mut out = Vec::new();
         live.feed_bus("can0", &frame(Some(1.0), READ_1120, &[8]), &mut out);
         assert!(out.is_empty(), "the request waits for its answer");
@@ -154,7 +154,7 @@ mod tests {
 
     #[test]
     fn buses_are_apart_and_interned() {
-        let mut live = LiveCan::new(true, 0);
+        let mut live = CanStage::new(true, 0);
         let mut out = Vec::new();
         live.feed_bus("can0", &frame(Some(1.0), READ_1120, &[8]), &mut out);
         // the answer on another bus answers nothing there
@@ -172,7 +172,7 @@ mod tests {
 
     #[test]
     fn tick_and_gap_release_waiting_requests() {
-        let mut live = LiveCan::new(false, 0);
+        let mut live = CanStage::new(false, 0);
         let mut out = Vec::new();
         live.feed_bus("can0", &frame(Some(1.0), READ_1120, &[8]), &mut out);
         live.tick(1.4, &mut out);
@@ -201,7 +201,7 @@ mod tests {
 
     #[test]
     fn a_stop_cuts_off_waiting_requests() {
-        let mut live = LiveCan::new(false, 0);
+        let mut live = CanStage::new(false, 0);
         let mut out = Vec::new();
         live.feed_bus("can0", &frame(Some(1.0), READ_1120, &[8]), &mut out);
         live.feed_bus("can1", &frame(Some(1.0), READ_1120, &[8]), &mut out);

@@ -1,4 +1,4 @@
-//! The offline decode path: analyzer/pipeline.py `Decoding` as `eg2scope decode FILE --jobs 1`
+//! The offline decode path: analyzer/session/stage.py `Decoding` as `eg2scope decode FILE --jobs 1`
 //! runs it (analyzer/session.py, analyzer/commands/decode.py and common.py), in one streaming
 //! pass: reader -> decoders -> lint -> pairing -> `--device`/`--errors-only` filter -> writer.
 //!
@@ -21,7 +21,7 @@ use std::io;
 use std::path::Path;
 use std::sync::Arc;
 
-/// Bytes of a stream looked at before choosing its protocol (analyzer/pipeline.py).
+/// Bytes of a stream looked at before choosing its protocol (analyzer/session/stage.py).
 pub const DETECT_BYTES: usize = 4096;
 
 /// CAN frames decoded per step of `next_batch` (about 140 KB of JSONL).
