@@ -165,7 +165,7 @@ class RunStateValue:
 
     key: str  # name in Record.fields
     fmt: str  # struct code, little endian: "B" u8, "H" u16
-    state: str  # the device-state field it reports (analyzer/tracker.py)
+    state: str  # the device-state field it reports (analyzer/session/tracker.py)
     label: str  # name in range warnings
     lo: int | None = None  # documented range, None where the manual gives none
     hi: int | None = None

@@ -1,6 +1,6 @@
 //! `analyzer._native.ArrowRun`: a decode of one capture whose records come out as Arrow
-//! buffers in `PARSE_SCHEMA`'s layout (arrow.rs), for analyzer/native_parquet.py, which makes
-//! arrays of them (`pa.Array.from_buffers`, no copy) and hands them to
+//! buffers in `PARSE_SCHEMA`'s layout (parquet/records.rs), for analyzer/parquet/native.py,
+//! which makes arrays of them (`pa.Array.from_buffers`, no copy) and hands them to
 //! `ParquetRecordWriter.write_parsed`. No JSON, no Python object per record.
 //!
 //! The decode runs in a thread of its own, one batch ahead: while Python and Arrow write a
@@ -24,11 +24,11 @@ use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
-/// Rows per batch: a quarter of a Parquet row group of analyzer/sinks/parquet.py
+/// Rows per batch: a quarter of a Parquet row group of analyzer/parquet/writer.py
 /// (`ROW_GROUP_ROWS`): small batches keep memory low, and cost Python nothing per row.
 const BATCH_ROWS: u64 = 16_384;
 
-/// One column of a batch, owned (arrow.rs `Buffers`).
+/// One column of a batch, owned (parquet/records.rs `Buffers`).
 pub(super) enum Part {
     AllNull(usize),
     Data {

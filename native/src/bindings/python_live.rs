@@ -1,6 +1,6 @@
 //! The native live CAN path, for Python: `CanStage` (analyzer/session/stage.py `Decoding`, CAN
 //! items only), `RecordBatch` (the records it gives, a lazy sequence of decoders/model.py
-//! `Record`) and `can_raw_messages` (analyzer/recording.py `McapRecorder.on_raw`'s JSON of
+//! `Record`) and `can_raw_messages` (analyzer/recording/recorder.py `McapRecorder.on_raw`'s JSON of
 //! CAN frames).
 //!
 //! The decoding itself is live.rs; here Items are read and records handed back. A batch keeps
@@ -1018,7 +1018,7 @@ fn push_bool(out: &mut String, b: bool) {
     out.push_str(if b { "true" } else { "false" });
 }
 
-/// Per CAN item, the JSON message analyzer/recording.py `McapRecorder.on_raw` writes on
+/// Per CAN item, the JSON message analyzer/recording/recorder.py `McapRecorder.on_raw` writes on
 /// `/raw/<bus>` (`_message` of `{"t", "id", "extended", "remote", "error", "fd", "dlc",
 /// "data" (base64), "channel"}`), byte-identical. Items that are not CAN frames raise
 /// TypeError.

@@ -1,9 +1,9 @@
-//! Records as Arrow columns, laid out as analyzer/parquet_schema.py `PARSE_SCHEMA`, for the
-//! Parquet output (analyzer/sinks/parquet.py `ParquetRecordWriter.write_parsed`): no JSON.
+//! Records as Arrow columns, laid out as analyzer/parquet/schema.py `PARSE_SCHEMA`, for the
+//! Parquet output (analyzer/parquet/writer.py `ParquetRecordWriter.write_parsed`): no JSON.
 //!
 //! The layout is not written down here: Python describes `PARSE_SCHEMA` at the start of a run
-//! (analyzer/native_parquet.py, one home for the columns) as a depth-first list of columns, and
-//! these builders fill it. What goes where mirrors analyzer/sinks/parquet.py `_line_by_line`
+//! (analyzer/parquet/native.py, one home for the columns) as a depth-first list of columns, and
+//! these builders fill it. What goes where mirrors analyzer/parquet/writer.py `_line_by_line`
 //! and `_split_fields`, the exact path of the Python engine:
 //! - the record columns take the `Record` attribute of their name (as `Record.to_dict` gives it:
 //!   `raw` as hex, NaN and infinities null as orjson writes them);

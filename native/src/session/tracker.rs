@@ -1,7 +1,7 @@
 //! One state per gripper, folded from the records of any protocol, one sample per reading.
 //!
-//! Mirrors `analyzer/tracker.py` (`Tracker.update`, `_registers`, `_serial`) and the JSON of a
-//! state sample, `analyzer/model.py` (`StateSample.to_dict` with `derived`), which the MCAP
+//! Mirrors `analyzer/session/tracker.py` (`Tracker.update`, `_registers`, `_serial`) and the JSON
+//! of a state sample, `analyzer/model.py` (`StateSample.to_dict` with `derived`), which the MCAP
 //! recorder writes as `orjson.dumps(sample.to_dict(), default=json_default)`.
 //!
 //! A state's values are a fixed array in `VALUE_KEYS` order (the Python dict always holds every
