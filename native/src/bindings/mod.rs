@@ -110,8 +110,8 @@ fn write_fd(fd: i32, data: &[u8]) -> io::Result<usize> {
     Ok(data.len())
 }
 
-/// Elsewhere Python writes the `bytes` batches itself (analyzer/session/native_run.py uses `write_batch`
-/// on POSIX only).
+/// Elsewhere Python writes the `bytes` batches itself (analyzer/session/native_run.py uses
+/// `write_batch` on POSIX only).
 #[cfg(not(unix))]
 fn write_fd(_fd: i32, _data: &[u8]) -> io::Result<usize> {
     Err(io::ErrorKind::Unsupported.into())

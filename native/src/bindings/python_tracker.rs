@@ -1,14 +1,14 @@
-//! `analyzer._native.Tracker` and `SampleBatch`: analyzer/session/tracker.py's `Tracker` folding the
-//! records of a `RecordBatch` (python_live.rs) in Rust (tracker.rs), its samples kept in Rust
-//! until asked for.
+//! `analyzer._native.Tracker` and `SampleBatch`: analyzer/session/tracker.py's `Tracker`
+//! folding the records of a `RecordBatch` (python_live.rs) in Rust (session/tracker.rs), its
+//! samples kept in Rust until asked for.
 //!
 //! A `SampleBatch` is a sequence of `analyzer.model.StateSample`, each built only when indexed
 //! or iterated (and then the same object every time), with bulk methods that need no Python
 //! object per sample: `messages()` (each sample's JSON, byte-identical to
 //! `orjson.dumps(sample.to_dict(), default=json_default)`), `times()`, `keys()`, `column(name)`
 //! (any attribute, as `[getattr(s, name) for s in batch]`; tests/native/test_batch_columns.py),
-//! `series(fields)` (analyzer/session/batches.py `SampleSequence.series`: the values of some fields grouped by
-//! gripper, what the Rerun listener plots; tests/native/test_sample_series.py).
+//! `series(fields)` (analyzer/session/batches.py `SampleSequence.series`: the values of some
+//! fields grouped by gripper, what the Rerun listener plots; tests/native/test_sample_series.py).
 //! `Tracker.states` builds fresh `analyzer.session.tracker.DeviceState` objects equal to the Python
 //! tracker's.
 //!
