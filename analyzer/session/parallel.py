@@ -78,9 +78,15 @@ class JoinError(Exception):
     """Two parts did not meet exactly: decode in one piece instead, keeping only the records
     from ``resume`` on (a byte offset or CAN frame index; 0: nothing was written yet)."""
 
-    def __init__(self, text: str, resume: int = 0) -> None:
+    def __init__(self, text: str, resume: int = 0, damage: bool = False) -> None:
         super().__init__(text)
         self.resume = resume
+        # damage in a part: the one-piece decode says where it is (in the file's own line
+        # numbers, not the part's), so the change of method is not worth a line of its own
+        self.damage = damage
+
+    def __reduce__(self) -> tuple[type[JoinError], tuple[str, int, bool]]:
+        return (JoinError, (str(self), self.resume, self.damage))  # a worker's, to the parent
 
 
 @dataclass(frozen=True)
@@ -231,7 +237,7 @@ def _can_frames(part: Part) -> Iterator[tuple[str, CanFrame]]:
         yield name, frame
     if reader.errors:
         # a malformed line shifts the frame numbering this split relies on
-        raise JoinError("; ".join(reader.errors[:3]))
+        raise JoinError("; ".join(reader.errors[:3]), damage=True)
 
 
 def _output(fmt: str, out: IO[bytes]) -> Listener:
@@ -433,7 +439,8 @@ def run_parallel(
                 try:
                     res = pending.get()
                 except JoinError as exc:  # the part could not be decided on its own
-                    raise JoinError(str(exc), 0 if prev is None else _resume_at(part)) from None
+                    resume = 0 if prev is None else _resume_at(part)
+                    raise JoinError(str(exc), resume, exc.damage) from None
                 if prev is None:
                     out.write(header)
                 else:
@@ -499,10 +506,11 @@ def decode_in_parallel(
             run_parallel(job, binary, progress, jobs, header)
     except JoinError as exc:
         binary.flush()
+        rest = "the rest of " if exc.resume else ""
+        if not exc.damage:
+            print(f"eg2scope: decoding {rest}{path.name} in one piece ({exc})", file=sys.stderr)
         if not exc.resume:
-            print(f"eg2scope: decoding {path.name} in one piece ({exc})", file=sys.stderr)
             return None
-        print(f"eg2scope: decoding the rest of {path.name} in one piece ({exc})", file=sys.stderr)
         raise
     binary.flush()
     return EXIT_OK

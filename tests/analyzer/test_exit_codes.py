@@ -502,3 +502,26 @@ def test_ctrl_c_while_the_commands_load_is_an_interruption_without_traceback(
     assert cli.main(["decode", "x.bin"]) == 130
     err = capsys.readouterr().err
     assert err == "eg2scope: interrupted before it began\n"
+
+
+def test_damage_in_a_part_is_said_once_with_the_files_line_number(
+    big_log: Path, tmp_path: Path
+) -> None:
+    """A malformed line inside a part of a parallel decode sends the rest to one piece, which
+    says where the damage is in the file's own line numbers; the change of method is not a
+    message of its own (its text would quote the part's line number)."""
+    damaged = tmp_path / "damaged.log"
+    lines = big_log.read_bytes().splitlines(keepends=True)
+    damaged.write_bytes(b"".join([*lines[:300_000], b"not a frame line\n", *lines[300_000:]]))
+    out = tmp_path / "o.jsonl"
+    proc = subprocess.run(
+        [sys.executable, "-m", "analyzer", "decode", str(damaged), "--engine", "python",
+         "--jobs", "2", "-f", "jsonl", "-o", str(out), "--no-progress"],
+        capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 3, proc.stderr
+    assert proc.stderr == (
+        f"eg2scope: {damaged}: line 300001: cannot parse: 'not a frame line' "
+        "(not a candump frame)\n"
+    )
+    assert sum(1 for _ in out.open()) == 400_000
