@@ -23,6 +23,7 @@ from textual import events, on, work
 from textual.app import App, ComposeResult, SystemCommand
 from textual.binding import BindingType
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.screen import Screen
 from textual.timer import Timer
 from textual.widgets import Footer, Input, Static, TabbedContent, TabPane
@@ -350,10 +351,13 @@ class Eg2ScopeApp(App[int]):
     def show_status(self) -> None:
         if self.closing:
             return
-        text = self.status_text()
-        if text != self._status:  # one line of fixed height: no layout needed
-            self._status = text
-            self.main_screen.query_one("#status", Static).update(text, layout=False)
+        try:
+            text = self.status_text()
+            if text != self._status:  # one line of fixed height: no layout needed
+                self.main_screen.query_one("#status", Static).update(text, layout=False)
+                self._status = text
+        except NoMatches:  # the 0.25 s timer fired while the app tears its panes down
+            return
 
     # -- selection, detail, hex --------------------------------------------------------------
 
