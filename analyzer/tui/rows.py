@@ -56,11 +56,34 @@ MARKERS: Final = (
 )
 
 
+SHORTEST_STUB: Final = 6  # a word cut shorter than this ("CMD_…") says nothing: cut before it
+
+
+def cut_at(text: str, width: int) -> int:
+    """Where to cut ``text`` so that it and an ellipsis fit ``width`` cells: at ``width - 1``,
+    or before the word there when only a stub of it would show and an earlier word ends in
+    the second half of the room (a list of names then loses whole names, not their heads)."""
+    cut = max(0, width - 1)
+    start = cut
+    while start > 0 and _in_word(text[start - 1]):
+        start -= 1
+    stub = cut - start
+    if 0 < stub < SHORTEST_STUB and _in_word(text[cut]):
+        end = len(text[:start].rstrip(" ,.;:"))
+        if end >= cut // 2:
+            return end
+    return cut
+
+
+def _in_word(char: str) -> bool:
+    return char.isalnum() or char == "_"
+
+
 def fit(text: str, width: int) -> str:
     """``text`` in exactly ``width`` cells: padded, or cut with an ellipsis."""
     if len(text) <= width:
         return text.ljust(width)
-    return text[: max(0, width - 1)] + ELLIPSIS if width > 0 else ""
+    return (text[: cut_at(text, width)] + ELLIPSIS).ljust(width) if width > 0 else ""
 
 
 class TimeMode(Enum):

@@ -28,7 +28,7 @@ from analyzer.tui.app import Eg2ScopeApp, SessionPlan
 from analyzer.tui.layout import row_layout
 from analyzer.tui.notes import Notes
 from analyzer.tui.replay import ReplaySource
-from analyzer.tui.rows import MARKERS, plain_row
+from analyzer.tui.rows import MARKERS, fit, plain_row
 from analyzer.tui.screens import HelpScreen
 from analyzer.tui.widgets.detail import DetailTree
 from analyzer.tui.widgets.devices import DevicePanel
@@ -386,6 +386,24 @@ def shown_line(widget, y: int = 0) -> str:
     return strips[region.y + y].crop(region.x, region.right).text
 
 
+@pytest.mark.parametrize(
+    ("text", "width", "shown"),
+    [
+        ("regs: CMD_FORCE_ACT, CMD_TEMP, CMD_STATUS", 36, "regs: CMD_FORCE_ACT, CMD_TEMP…"),
+        (
+            "regs: CMD_FORCE_ACT, CMD_TEMP, CMD_STATUS",
+            40,
+            "regs: CMD_FORCE_ACT, CMD_TEMP, CMD_STAT…",
+        ),
+        ("CMD_ERRORCODE..CMD_STATUS", 20, "CMD_ERRORCODE…"),
+        ("measured_opening", 8, "measure…"),  # one word: cut inside it
+        ("a CMDXYZW", 8, "a CMDXY…"),  # the earlier word ends too early to cut there
+    ],
+)
+def test_a_cut_drops_a_word_rather_than_leave_a_stub_of_it(text: str, width: int, shown: str):
+    assert fit(text, width) == shown.ljust(width)
+
+
 @pytest.mark.parametrize("size", list(SIZES))
 def test_whatever_is_cut_ends_in_an_ellipsis(size: str) -> None:
     """The detail tree, the status line, the filter's error line and the footer: nothing runs
@@ -411,6 +429,7 @@ def test_whatever_is_cut_ends_in_an_ellipsis(size: str) -> None:
                     line = shown_line(tree, y).rstrip()
                     if full and not line.endswith(full):
                         assert line.endswith("…"), (line, full)
+                        assert not line.endswith("CMD_…"), (line, full)  # a stub says nothing
             if size == "80x24":
                 await pilot.press("d")
             frames.focus()

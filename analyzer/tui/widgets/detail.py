@@ -19,6 +19,7 @@ from decoders.flags import DESCRIPTIONS
 from decoders.model import Record
 
 from ..messages import ByteSelected, FieldSelected
+from ..rows import ELLIPSIS, cut_at
 from ..spans import FRAME_PART, Span, span_at, span_of, spans
 
 NodeData = Span | None
@@ -124,7 +125,11 @@ class DetailTree(Tree[NodeData]):
         if self.last_line >= self.size.height:  # the scroll bar (not laid out yet) takes a share
             room -= self.styles.scrollbar_size_vertical
         if room > 0 and label.cell_len > room:
-            label.truncate(room, overflow="ellipsis")
+            if label.cell_len == len(label.plain):  # one cell a character: cut between words
+                label.truncate(cut_at(label.plain, room))
+                label.append(ELLIPSIS)
+            else:
+                label.truncate(room, overflow="ellipsis")
         return label
 
     def select_offset(self, offset: int) -> None:
