@@ -3,7 +3,7 @@
 //!
 //! This is the hot path of `--format jsonl` (every record's strings pass through `push_str`),
 //! so strings are scanned 8 bytes at a time and clean runs are copied at once, and integers
-//! are formatted with a two-digit table instead of `core::fmt`.
+//! are formatted by `itoa` instead of `core::fmt`.
 
 use crate::decoders::model::Value;
 use crate::pyfloat::push_json_float;
@@ -102,14 +102,6 @@ static CLEAN: [bool; 256] = {
     t
 };
 
-/// "00".."99": two decimal digits per table lookup.
-static DIGITS2: &[u8; 200] = b"\
-0001020304050607080910111213141516171819\
-2021222324252627282930313233343536373839\
-4041424344454647484950515253545556575859\
-6061626364656667686970717273747576777879\
-8081828384858687888990919293949596979899";
-
 /// Appends ASCII bytes (digits, hex digits, spaces) without `from_utf8`'s validation, which
 /// cost more than the formatting itself.
 #[inline]
@@ -122,43 +114,10 @@ pub fn push_ascii(out: &mut String, bytes: &[u8]) {
     unsafe { out.as_mut_vec() }.extend_from_slice(bytes);
 }
 
-/// The decimal digits of `v` (as `{}` writes a u64): the length first (`ilog10`), two digits
-/// per table lookup into a stack buffer, and the whole buffer copied at once (a fixed-size
-/// copy is a few moves; a copy of the digits alone would be a `memcpy` call).
+/// The decimal digits of `v` (as `{}` writes a u64).
 #[inline]
 pub fn push_u64(out: &mut String, v: u64) {
-    // SAFETY: only ASCII digits are written, so `out` stays UTF-8
-    let bytes = unsafe { out.as_mut_vec() };
-    if v < 10 {
-        bytes.push(b'0' + v as u8); // most fields: a flag, a small id, 0
-        return;
-    }
-    let n = v.ilog10() as usize + 1; // 2..=20
-    let mut buf = [0u8; 20];
-    let mut v = v;
-    let mut i = n;
-    while v >= 100 {
-        let d = (v % 100) as usize * 2;
-        v /= 100;
-        i -= 2;
-        buf[i] = DIGITS2[d];
-        buf[i + 1] = DIGITS2[d + 1];
-    }
-    if v >= 10 {
-        let d = v as usize * 2;
-        buf[0] = DIGITS2[d];
-        buf[1] = DIGITS2[d + 1];
-    } else {
-        buf[0] = b'0' + v as u8;
-    }
-    bytes.reserve(buf.len());
-    let len = bytes.len();
-    // SAFETY: 20 bytes of spare capacity were reserved; the first n are the digits, and only
-    // they are counted in the length
-    unsafe {
-        std::ptr::copy_nonoverlapping(buf.as_ptr(), bytes.as_mut_ptr().add(len), buf.len());
-        bytes.set_len(len + n);
-    }
+    out.push_str(itoa::Buffer::new().format(v));
 }
 
 /// The decimal digits of `v` (as `{}` writes an i64).
