@@ -11,7 +11,11 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+TESTS = Path(__file__).resolve().parent
+# the helpers importable from every folder, and the project itself ahead of them: tests/analyzer
+# (a folder without __init__) would otherwise pass for the analyzer package when a folder's
+# tests run alone, ahead of the editable install's finder
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]
 
 from native_core import require_native
 
@@ -23,3 +27,12 @@ settings.load_profile("eg2scope")
 def native_core() -> None:
     """The native core, complete: else the test skips or fails (``native_core.require_native``)."""
     require_native()
+
+
+@pytest.fixture(autouse=True)
+def native_engine_case(request: pytest.FixtureRequest) -> None:
+    """A case parametrized ``engine="native"`` needs the core like ``native_core`` (a param
+    cannot carry that fixture's mark)."""
+    callspec = getattr(request.node, "callspec", None)
+    if callspec is not None and callspec.params.get("engine") == "native":
+        require_native()

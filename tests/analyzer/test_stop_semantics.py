@@ -13,9 +13,9 @@ from typing import Any
 
 import can
 import pytest
+from native_core import needs_native
 
 from analyzer.model import Item, SourceEvent
-from analyzer.session.batches import native_session_available
 from analyzer.session.listener import Listener
 from analyzer.session.session import Session, SessionOptions
 from analyzer.sources.can_tap import CanTap
@@ -140,12 +140,7 @@ def _can_stop_records(engine: str) -> list[dict[str, Any]]:
     "engine",
     [
         "python",
-        pytest.param(
-            "native",
-            marks=pytest.mark.skipif(
-                not native_session_available(), reason="the native core is not built"
-            ),
-        ),
+        "native",  # needs the core (tests/conftest.py: native_engine_case)
     ],
 )
 def test_can_requests_waiting_at_a_stop_are_cut_off(engine: str) -> None:
@@ -156,7 +151,7 @@ def test_can_requests_waiting_at_a_stop_are_cut_off(engine: str) -> None:
     ]
 
 
-@pytest.mark.skipif(not native_session_available(), reason="the native core is not built")
+@needs_native
 def test_both_engines_cut_off_alike() -> None:
     assert _can_stop_records("native") == _can_stop_records("python")
 

@@ -19,11 +19,10 @@ from typing import Any, Generic, TypeVar
 import orjson
 import pytest
 from e2e_inputs import EG2SCOPE, HEADLESS, ROOT
+from native_core import require_native
 
 from analyzer.model import StateSample
-from analyzer.session.batches import native_session_available
 from analyzer.session.capture import CaptureOptions, run_capture
-from analyzer.session.engine import available as native_decode_available
 from analyzer.session.listener import Listener
 from analyzer.session.session import Session, SessionOptions
 from decoders.eg2_serial import COMMANDS
@@ -34,16 +33,11 @@ from rrd_helpers import Rrd, read_rrd
 
 __all__ = ["Rrd", "read_rrd"]
 
-NO_NATIVE_DECODE = "the native core is not built (eg2scope --version says why)"
-NO_NATIVE_SESSION = "the native core's session classes (CanStage, Tracker) are not built"
 
-
-def skip_unless_native(session: bool = False) -> None:
-    """Skip a native cell, saying why, where the core is not built."""
-    if session and not native_session_available():
-        pytest.skip(NO_NATIVE_SESSION)
-    if not native_decode_available():
-        pytest.skip(NO_NATIVE_DECODE)
+def skip_unless_native() -> None:
+    """A native cell runs where the core is complete; else it skips, saying why (no cargo: a
+    pure-Python install) or fails (cargo is there, so the core should have been built)."""
+    require_native()
 
 
 def eg2scope(*argv: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess[bytes]:

@@ -67,7 +67,7 @@ def test_plot_process(kind: str, plots, reference) -> None:
 @pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
 def test_plot_on_each_engine(kind: str, engine: str, inputs, reference, tmp_path, monkeypatch):
     if engine == "native":
-        skip_unless_native(session=True)
+        skip_unless_native()
     force_session_engine(monkeypatch, engine)
     out = tmp_path / "plot.rrd"
     assert main(["plot", str(inputs[kind]), "--save", str(out), "--no-progress"]) == 0

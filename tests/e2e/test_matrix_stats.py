@@ -44,7 +44,7 @@ def test_stats_on_each_engine(
     kind: str, engine: str, inputs, reference, monkeypatch, capsys
 ) -> None:
     if engine == "native":
-        skip_unless_native(session=True)
+        skip_unless_native()
     force_session_engine(monkeypatch, engine)
     assert main(["stats", str(inputs[kind]), "--format", "json", "--no-progress"]) == 0
     data = orjson.loads(capsys.readouterr().out)

@@ -65,7 +65,7 @@ async def replayed(path: Path) -> tuple[Eg2ScopeApp, list[Session], list[BaseExc
 @pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
 def test_tui_store_holds_decodes_records(kind: str, engine: str, inputs, reference, monkeypatch):
     if engine == "native":
-        skip_unless_native(session=True)
+        skip_unless_native()
     force_session_engine(monkeypatch, engine)
     app, ended, failures = asyncio.run(replayed(inputs[kind]))
     assert not failures, f"the session thread failed: {failures[0]!r}"

@@ -13,17 +13,15 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from native_core import needs_native
 
 from analyzer import cli
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import expand
-from analyzer.session import engine as native
 
 ROOT = Path(__file__).resolve().parents[2]
 
-pytestmark = pytest.mark.skipif(
-    not hasattr(native._native, "ArrowRun"), reason=f"the native core is {native.WHY_NOT}"
-)
+pytestmark = needs_native
 
 
 @pytest.fixture(scope="module")

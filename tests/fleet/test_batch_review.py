@@ -20,7 +20,6 @@ import pytest
 from analyzer import cli
 from analyzer.fleet import layout
 from analyzer.fleet.inputs import content_hash
-from analyzer.session import engine as native
 
 ROOT = Path(__file__).resolve().parents[2]
 SERIAL = ROOT / "captures/serial_session.bin"
@@ -29,12 +28,7 @@ CAN_LOG = ROOT / "captures/can_pick_place.log"
 
 ENGINES = [
     "python",
-    pytest.param(
-        "native",
-        marks=pytest.mark.skipif(
-            not hasattr(native._native, "ArrowRun"), reason=f"the native core is {native.WHY_NOT}"
-        ),
-    ),
+    "native",  # needs the core (tests/conftest.py: native_engine_case)
 ]
 
 # a modification time no test run has: 2024-03-05 12:00 UTC

@@ -65,3 +65,29 @@ def test_without_cargo_the_native_tests_skip_saying_why(target: str) -> None:
     assert ran.stdout.rstrip().splitlines()[-1].startswith("1 skipped in ")  # no fail, no error
     assert "the native core is not built" in ran.stdout
     assert "no cargo on the PATH" in ran.stdout
+
+
+# native cases beside Python ones, outside tests/native: a module-wide mark, a test's own mark,
+# a case parametrized engine="native"
+OUTSIDE = [
+    "tests/rerun/test_native_plot_path.py",
+    "tests/analyzer/test_stop_semantics.py::test_both_engines_cut_off_alike",
+    "tests/analyzer/test_stop_semantics.py::test_can_requests_waiting_at_a_stop_are_cut_off[native]",
+]
+
+
+@pytest.mark.parametrize("target", OUTSIDE)
+def test_native_cases_elsewhere_fail_too_where_cargo_is(target: str) -> None:
+    ran = pytest_run(HIDE_CORE, with_cargo(), target)
+    assert ran.returncode not in (0, 5), ran.stdout
+    assert "yet cargo is on the PATH" in ran.stdout
+    assert " passed" not in ran.stdout.rstrip().splitlines()[-1]  # every case needs the core
+
+
+@pytest.mark.parametrize("target", OUTSIDE)
+def test_native_cases_elsewhere_skip_without_cargo(target: str) -> None:
+    ran = pytest_run(HIDE_CORE, NO_CARGO_PATH, target)
+    assert ran.returncode in (0, 5), ran.stdout
+    last = ran.stdout.rstrip().splitlines()[-1]
+    assert " skipped in " in last and "failed" not in last and "error" not in last, last
+    assert "no cargo on the PATH" in ran.stdout

@@ -15,24 +15,21 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from native_core import needs_native
 from rerun_inputs import CAPTURES, Collector, faults_can, write_candump
 from rrd_helpers import read_rrd
 
 from analyzer.cli import main
 from analyzer.plot.listener import RerunListener
 from analyzer.plot.logs import log_rows
-from analyzer.session import engine as native
-from analyzer.session.batches import RecordSequence, native_session_available
+from analyzer.session.batches import RecordSequence
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from traffic import warning_can_frames
 
-pytestmark = pytest.mark.skipif(
-    not native_session_available() or not hasattr(native._native, "CandumpFrames"),
-    reason="the native core is not built",
-)
+pytestmark = needs_native
 
 
 def warnings_log(tmp: Path) -> Path:

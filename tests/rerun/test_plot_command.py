@@ -38,7 +38,6 @@ from analyzer.plot.target import (
     rerun_executable,
     rrd_name,
 )
-from analyzer.session.batches import native_session_available
 from analyzer.session.capture import CaptureOptions, run_capture
 from decoders import build as b
 from decoders.eg2_serial import Cmd
@@ -66,8 +65,6 @@ def opening_counts(path: Path) -> dict[str, int]:
     ids=lambda x: str(x),
 )
 def test_plot_saves_every_kind_of_input(tmp_path: Path, name: str, engine: str) -> None:
-    if engine == "native" and not native_session_available():
-        pytest.skip("the native core is not built")
     capture = INPUTS[name](tmp_path)
     out = tmp_path / "out.rrd"
     argv = ["plot", str(capture), "--save", str(out), "--no-progress", "--engine", engine]

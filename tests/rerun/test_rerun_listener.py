@@ -17,13 +17,14 @@ from typing import Any
 
 import can
 import pytest
+from native_core import require_native
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
 from analyzer.model import StateSample
 from analyzer.plot.blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
 from analyzer.plot.listener import RerunListener
-from analyzer.session.batches import RecordSequence, SampleSequence, native_session_available
+from analyzer.session.batches import RecordSequence, SampleSequence
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import make_listener
 from analyzer.session.session import live_session
@@ -73,8 +74,8 @@ class Plotted:
 
     def __getitem__(self, key: str | tuple[str, str]) -> tuple[Collector, Rrd]:
         name, engine = (key, "python") if isinstance(key, str) else key
-        if engine == "native" and not native_session_available():
-            pytest.skip("the native core is not built")
+        if engine == "native":
+            require_native()
         if (name, engine) not in self.done:
             capture = INPUTS[name](self.tmp)
             self.done[(name, engine)] = plot(capture, self.tmp / f"{name}-{engine}.rrd", engine)
@@ -524,8 +525,6 @@ def run_live(
 
 @pytest.mark.parametrize("engine", ["python", "native"])
 def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
-    if engine == "native" and not native_session_available():
-        pytest.skip("the native core is not built")
     channel = f"eg2-rerun-{os.getpid()}-{time.monotonic_ns()}"
 
     def feed() -> None:

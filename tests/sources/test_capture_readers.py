@@ -235,11 +235,6 @@ def test_a_garbled_asc_frame_line_is_damage_where_it_is(
 ) -> None:
     """A frame line python-can's ASC reader skips in silence is reported with its line number,
     exit 3, and every other frame is decoded (both engines read .asc through python-can)."""
-    if engine == "native":
-        from analyzer.session.engine import available
-
-        if not available():
-            pytest.skip("the native core is not built")
     path = tmp_path / "corrupt.asc"
     messages = _messages(20)
     _write(path, messages)

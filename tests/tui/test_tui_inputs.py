@@ -15,13 +15,10 @@ from pathlib import Path
 
 import pytest
 from conftest import SIZES, capture_app, driving, eg2scope, until
+from native_core import needs_native
 
-from analyzer.session import engine as native
-from analyzer.session.batches import native_session_available
 from analyzer.tui.layout import row_layout
 from analyzer.tui.rows import ELLIPSIS, plain_row
-
-CAN_NATIVE = native.available() and native_session_available()
 
 
 def decoded(path: Path, *argv: str) -> list[dict]:
@@ -106,7 +103,7 @@ def test_every_input_is_replayed_whole_and_in_time_order(
     asyncio.run(scenario())
 
 
-@pytest.mark.skipif(not CAN_NATIVE, reason=f"the native core is {native.WHY_NOT}")
+@needs_native
 @pytest.mark.parametrize("kind", ["candump log", ".asc", "can recording"])
 def test_native_and_python_engines_fill_the_same_store(inputs: dict[str, Path], kind: str) -> None:
     """The TUI picks the native engine for all-CAN input; ``--engine python`` the Python one:
