@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-TESTS = Path(__file__).resolve().parent
 # the helpers importable from every folder, and the project itself ahead of them: tests/analyzer
 # (a folder without __init__) would otherwise pass for the analyzer package when a folder's
 # tests run alone, ahead of the editable install's finder
-sys.path[:0] = [str(TESTS.parent), str(TESTS)]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from native_core import require_native
 
