@@ -1,11 +1,13 @@
-"""The words of the errors and warnings a decoder writes, keyed by flag code: one home for the
-texts both engines say (``native/codegen.py`` writes the crate's copy from this catalogue).
+"""The words of the errors and warnings the decoders write, keyed by flag code: one home for
+the texts both engines say (``native/codegen.py`` writes the crate's copy from this catalogue).
 
 A message is a ``str.format`` template with named fields; the crate gets a constant for a
-message without fields and a macro around ``format!`` (which takes the same ``{name}`` and
-``{name:02X}``) for the others. The catalogue holds the serial decoder's messages
-(``decoders/eg2_serial.py``) and the range warning every protocol writes; a decoder's summary
-lines are not messages.
+message without fields and a macro around ``format!`` for the others (the generator maps the
+format specs, which must print the same in both: ``{x:02X}``, ``{x:#x}``, ``{x:.1f}``). A float
+field without a spec prints differently (Python ``1.0``, Rust ``1``): pass such a number as a
+string formatted by the caller. The catalogue is grouped by protocol (names start with it); a
+decoder's summary lines are not messages. A message marked ``native=False`` is said by the
+Python decoders only (the crate has no such case) and gets no Rust copy.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from . import flags as F
 class Message:
     code: str  # the flag code written with the text (decoders/flags.py)
     template: str  # str.format, named fields only
+    native: bool = True  # the crate says it too (False: the Python decoders only)
 
     def text(self, **values: object) -> str:
         return self.template.format(**values) if values else self.template
