@@ -48,6 +48,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from . import flags as F
+from . import messages as M
 from .model import EG2_CAN, FOREIGN_CAN, FRAME, REQUEST, RESPONSE, CanFrame, Record
 from .notes import Notes
 from .registers import (
@@ -111,8 +112,8 @@ def can_error_text(error_class: int) -> str:
     """An error frame's identifier (SocketCAN error class bits) in words."""
     words = [text for bit, text in _CAN_ERR_CLASSES if error_class & bit]
     if not words:
-        return "CAN error frame"
-    return f"CAN error frame: {', '.join(words)} (class 0x{error_class:03X})"
+        return M.CAN_ERROR_FRAME.text()
+    return M.CAN_ERROR_FRAME_CLASSES.text(classes=", ".join(words), error_class=error_class)
 
 
 def _count_shaped(data: bytes) -> bool:
@@ -249,32 +250,32 @@ def _span_warnings(address: int, n: int, regs: list[Register], write: bool, note
     """Flag how a span is laid out: odd address or length, unknown or read-only registers."""
     if address & 1:
         reg = _register_at(address - 1)
-        notes.warn(
-            F.ODD_SPAN,
-            f"odd start address {address}: the first byte is the high byte of {reg.name} "
-            f"(address {address - 1})",
+        notes.warn_of(
+            M.CAN_ODD_START, address=address, register=reg.name, register_address=address - 1
         )
     if (address + n) & 1 and n > 0:
         reg = _register_at(address + n - 1)
-        notes.warn(
-            F.ODD_SPAN,
-            f"the span ends inside a register ({_plural(n)} from {address}): the last byte is "
-            f"the low byte of {reg.name} (address {address + n - 1})",
+        notes.warn_of(
+            M.CAN_ODD_END,
+            bytes=_plural(n),
+            address=address,
+            register=reg.name,
+            register_address=address + n - 1,
         )
     elif n & 1:
-        notes.warn(F.ODD_SPAN, f"odd length {n}: registers are 2 bytes")
+        notes.warn_of(M.CAN_ODD_LENGTH, length=n)
     for reg in regs:
         if not reg.documented:
             if MAP_FIRST <= reg.can_address <= MAP_LAST:
-                text = f"undocumented address {reg.can_address} (register {reg.number})"
-            else:
-                text = (
-                    f"address {reg.can_address} is outside the register map "
-                    f"({MAP_FIRST}-{MAP_LAST})"
+                notes.warn_of(
+                    M.CAN_UNDOCUMENTED_ADDRESS, address=reg.can_address, number=reg.number
                 )
-            notes.warn(F.UNDOCUMENTED, text)
+            else:
+                notes.warn_of(
+                    M.CAN_OUTSIDE_MAP, address=reg.can_address, first=MAP_FIRST, last=MAP_LAST
+                )
         elif write and reg.access == "ro":
-            notes.warn(F.READ_ONLY_WRITE, f"write to read-only register {reg.name} ({reg.key})")
+            notes.warn_of(M.CAN_READ_ONLY_WRITE, name=reg.name, key=reg.key)
 
 
 # (protocol, direction, device, code, name, fields, errors, warnings, summary, pair_key,
@@ -461,9 +462,9 @@ class Eg2CanDecoder:
             length=len(raw),
             raw=raw,
             index=index,
-            errors=[f"internal decoder error: {exc!r}"],
+            errors=[M.CAN_DECODER_ERROR.text(error=repr(exc))],
             summary="undecodable frame",
-            flags=[F.FOREIGN, F.DECODER_ERROR],
+            flags=[F.FOREIGN, M.CAN_DECODER_ERROR.code],
         )
 
     # -- frames that are not EG2 ------------------------------------------------------------
@@ -501,7 +502,7 @@ def _id_fields(aid: int, n: int) -> tuple[dict[str, Any], Notes]:
     }
     notes = Notes()
     if device == 0:
-        notes.warn(F.INVALID_ID, "device 0 is outside the settable IDs 1-16382")
+        notes.warn_of(M.CAN_DEVICE_ZERO)
     if device == BROADCAST:
         fields["broadcast"] = True
     return fields, notes
@@ -517,11 +518,7 @@ def _make_layout(aid: int, n: int, tag: int) -> _Layout:
     write = op == OP_WRITE
     if tag >= _TAG_MISMATCH:
         asked = tag - _TAG_MISMATCH
-        notes.warn(
-            F.LENGTH_MISMATCH,
-            f"response length mismatch: the pending request asked for {_plural(asked)}, "
-            f"the response carries {n}",
-        )
+        notes.warn_of(M.CAN_LENGTH_MISMATCH, asked=_plural(asked), length=n)
     _span_warnings(address, n, regs, write, notes)
     head = _register_at(address - 1) if address & 1 else None
     start = 1 if head is not None else 0
@@ -591,15 +588,9 @@ def _fill(layout: _Layout, data: bytes) -> _Template:
 def _note_ambiguity(layout: _Layout, count: int, notes: Notes) -> None:
     """A value-carrying frame shaped like a count could also be the other direction."""
     if layout.ambiguity == "read":
-        text = (
-            f"could also be a repeated read request of {_plural(count)} "
-            "(taken as the response to the pending request)"
-        )
+        notes.warn_of(M.CAN_MAYBE_READ_REQUEST, bytes=_plural(count))
     else:
-        text = (
-            f"could also be the response to a write of {_plural(count)} whose request was not seen"
-        )
-    notes.warn(F.AMBIGUOUS_DIRECTION, text)
+        notes.warn_of(M.CAN_MAYBE_WRITE_RESPONSE, bytes=_plural(count))
 
 
 def _half_byte(
@@ -631,8 +622,8 @@ def _fill_values(
         parts.append(text)
         if special is not None:
             problem, extra, save = special
-            if problem is not None:
-                notes.warn(F.OUT_OF_RANGE, problem)
+            if problem is not None:  # VALUE_OUT_OF_RANGE's text, made once per value
+                notes.warn(M.VALUE_OUT_OF_RANGE.code, problem)
             if extra is not None:
                 fields[extra[0]] = extra[1]
             if save:
@@ -656,7 +647,7 @@ def _build_other(aid: int, data: bytes, tag: int) -> _Template:
         name, summary = _write_response(address, data, fields)
     elif op in (OP_READ, OP_WRITE):  # no data at all
         what = "read" if op == OP_READ else "write"
-        notes.error(F.MALFORMED, f"{what} frame without data: neither a request nor a response")
+        notes.error_of(M.CAN_NO_DATA, what=what)
         summary = f"{what} at {address}: no data"
     else:
         name, summary = _raw_operation(op, address, data, fields, notes)
@@ -709,10 +700,7 @@ def _raw_operation(
 ) -> tuple[str, str]:
     """Name and summary of operations 2 and 3, whose payload the manual does not lay out."""
     fields["data"] = _hex(data)
-    notes.warn(
-        F.UNDOCUMENTED,
-        f"operation {op} ({OPERATIONS[op]}): the manual gives no payload layout, shown raw",
-    )
+    notes.warn_of(M.CAN_RAW_OPERATION, op=op, name=OPERATIONS[op])
     return OPERATIONS[op], f"{OPERATIONS[op]} at {address} [{len(data)}] {_hex(data)}".rstrip()
 
 
@@ -729,13 +717,10 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
         summary = _error_frame(aid, data, fields, notes)
     else:
         if not 0 <= aid <= (MAX_ID if extended else 0x7FF):
-            notes.warn(
-                F.MALFORMED,
-                f"identifier {aid:#x} does not fit in {29 if extended else 11} bits",
-            )
+            notes.warn_of(M.CAN_ID_TOO_WIDE, id=aid, bits=29 if extended else 11)
         if frame.is_remote:
             # not EG2 (it sends data frames only): the code is the record's own foreign
-            notes.warn(F.FOREIGN, "remote frame")
+            notes.warn_of(M.CAN_REMOTE_FRAME)
             summary = f"remote {kind} {ident} [{length}]"
         else:
             summary = _data_frame(frame, data, f"{kind} {ident}", filtered, fields, notes)
@@ -760,7 +745,7 @@ def _build_foreign(frame: CanFrame, data: bytes, length: int, filtered: bool) ->
 def _error_frame(aid: int, data: bytes, fields: dict[str, Any], notes: Notes) -> str:
     """Summary of a CAN error frame (aid: its error class); its problem is noted."""
     text = can_error_text(aid)
-    notes.error(F.CAN_ERROR_FRAME, text)
+    notes.error(M.CAN_ERROR_FRAME.code, text)  # can_error_text: the catalogue's words
     fields["error_class"] = aid
     fields["data"] = _hex(data)
     return f"{text} [{len(data)}] {_hex(data)}".rstrip()
@@ -781,9 +766,9 @@ def _data_frame(
         fields["fd"] = True
         title = "FD " + title
     elif len(data) > 8:
-        notes.warn(F.MALFORMED, f"{len(data)} data bytes in a classic CAN frame")
+        notes.warn_of(M.CAN_TOO_LONG, length=len(data))
     elif frame.dlc is not None and frame.dlc != len(data):
-        notes.warn(F.MALFORMED, f"DLC {frame.dlc} with {len(data)} data bytes")
+        notes.warn_of(M.CAN_DLC_MISMATCH, dlc=frame.dlc, length=len(data))
     elif frame.is_extended and filtered and 0 <= aid < RESERVED_BIT:
         fields["eg2_device"] = aid & 0x3FFF  # left out by the decoder's device filter
     return f"{title} [{len(data)}] {_hex(data)}".rstrip()

@@ -626,7 +626,5 @@ class Eg2SerialDecoder(ByteStreamDecoder):
 
     def truncated_reason(self, raw: bytes) -> str:
         if len(raw) < 4:
-            return f"truncated frame: stream ended {len(raw)} bytes in, before the length byte"
-        return (
-            f"truncated frame: LEN {raw[3]} needs {raw[3] + 5} bytes, stream ended after {len(raw)}"
-        )
+            return M.SERIAL_TRUNCATED_HEADER.text(length=len(raw))
+        return M.SERIAL_TRUNCATED_BODY.text(len_byte=raw[3], needed=raw[3] + 5, length=len(raw))

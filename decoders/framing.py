@@ -31,9 +31,8 @@ from __future__ import annotations
 from collections import deque
 from typing import Final
 
-from .flags import CUT_OFF as CUT_OFF_FLAG
+from . import messages as M
 from .flags import ESTIMATED_TIME
-from .flags import GARBAGE as GARBAGE_FLAG
 from .flags import TRUNCATED as TRUNCATED_FLAG
 from .model import CUT_OFF, GARBAGE, TRUNCATED, Chunk, Record
 
@@ -89,7 +88,7 @@ class ByteStreamDecoder:
         raise NotImplementedError
 
     def truncated_reason(self, raw: bytes) -> str:
-        return f"truncated frame: stream ended after {len(raw)} bytes"
+        return M.FRAMING_TRUNCATED.text(length=len(raw))
 
     # -- the shared machinery ---------------------------------------------------------------
 
@@ -336,9 +335,9 @@ class ByteStreamDecoder:
                 length=len(raw),
                 raw=raw,
                 offset=self._base + lo,
-                errors=[f"garbage: {len(raw)} bytes belong to no frame ({self._garbage_why})"],
+                errors=[M.FRAMING_GARBAGE.text(length=len(raw), why=self._garbage_why)],
                 summary=f"{len(raw)} garbage bytes",
-                flags=[GARBAGE_FLAG],
+                flags=[M.FRAMING_GARBAGE.code],
             )
         )
 
@@ -364,7 +363,7 @@ class ByteStreamDecoder:
                 offset=self._base + pos,
                 errors=[self.truncated_reason(raw)],
                 summary=f"truncated frame ({len(raw)} bytes)",
-                flags=[TRUNCATED_FLAG],
+                flags=[TRUNCATED_FLAG],  # the words are the protocol's truncated_reason
             )
         )
 
@@ -378,12 +377,9 @@ class ByteStreamDecoder:
                 length=len(raw),
                 raw=raw,
                 offset=self._base + pos,
-                warnings=[
-                    f"cut off by the stop: the capture was stopped {_bytes(len(raw))} into "
-                    "this frame"
-                ],
+                warnings=[M.FRAMING_CUT_OFF.text(bytes=_bytes(len(raw)))],
                 summary=f"frame cut off by the stop ({_bytes(len(raw))})",
-                flags=[CUT_OFF_FLAG],
+                flags=[M.FRAMING_CUT_OFF.code],
             )
         )
 

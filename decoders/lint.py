@@ -9,7 +9,7 @@ and CRC byte order are flagged by the protocol decoders themselves, where the va
 
 from __future__ import annotations
 
-from .flags import CLOSER_THAN_5MS, DURING_SAVE
+from . import messages as M
 from .model import FRAME, REQUEST, Record
 
 MIN_GAP_S = 0.005
@@ -34,20 +34,20 @@ class TimingLinter:
         if saved is not None:
             dt = t - saved
             if dt < self.after_save_s:
-                rec.warnings.append(
-                    f"command {dt * 1000:.0f} ms after a parameter save "
-                    f"(the manual asks to wait more than {self.after_save_s:g} s)"
-                )
-                rec.flags.append(DURING_SAVE)
+                wait = f"{self.after_save_s:g}"
+                _note(rec, M.LINT_DURING_SAVE, ms=dt * 1000, wait=wait)
             else:
                 del self._save[key]
         last = self._last.get(key)
         if last is not None and t - last < self.min_gap_s:
-            rec.warnings.append(
-                f"command {(t - last) * 1000:.2f} ms after the previous one to this device "
-                f"(the manual asks for at least {self.min_gap_s * 1000:.0f} ms)"
-            )
-            rec.flags.append(CLOSER_THAN_5MS)
+            gap_ms = self.min_gap_s * 1000
+            _note(rec, M.LINT_TOO_CLOSE, ms=(t - last) * 1000, min_gap_ms=gap_ms)
         self._last[key] = t
         if rec.is_save:
             self._save[key] = t
+
+
+def _note(rec: Record, message: M.Message, **values: object) -> None:
+    """A warning and its code (appended even when the record has the code, as in the crate)."""
+    rec.warnings.append(message.text(**values))
+    rec.flags.append(message.code)

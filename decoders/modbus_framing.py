@@ -27,6 +27,7 @@ from typing import Any, Final
 
 import crcmod.predefined
 
+from . import messages as M
 from .framing import NEED_MORE, ByteStreamDecoder
 from .model import MODBUS_RTU, RESPONSE
 
@@ -414,14 +415,14 @@ class ModbusFramer(ByteStreamDecoder):
 
     def truncated_reason(self, raw: bytes) -> str:
         n = len(raw)
-        text = f"truncated frame: the stream ended after {n} byte{'s' if n != 1 else ''}"
+        got = f"{n} byte{'s' if n != 1 else ''}"
         kind = KIND[raw[1]] if n >= 2 else 0
         if not kind:
-            return text
+            return M.MODBUS_TRUNCATED.text(bytes=got)
         func = FUNCTION_TEXT[raw[1] & 0x7F]
         what = f"exception response to {func}" if kind == KIND_EXCEPTION else func
         lengths = sorted({c for c in candidates(raw, 0, n, kind, False) if c > n})
         if lengths:
-            text = f"truncated frame: the stream ended after {n} of "
-            text += " or ".join(map(str, lengths)) + " bytes"
-        return f"{text} ({what})"
+            text = " or ".join(map(str, lengths))
+            return M.MODBUS_TRUNCATED_LENGTHS.text(length=n, lengths=text, what=what)
+        return M.MODBUS_TRUNCATED_FUNCTION.text(bytes=got, what=what)

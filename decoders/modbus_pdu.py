@@ -17,6 +17,7 @@ from __future__ import annotations
 from typing import Any, Final
 
 from . import flags as F
+from . import messages as M
 from .modbus_framing import (
     CRC_BAD,
     CRC_OK,
@@ -44,10 +45,6 @@ from .modbus_registers import plan, value_of, words
 from .model import REQUEST, RESPONSE
 from .notes import Notes
 from .registers import SAVE_REGISTERS
-
-CRC_SWAPPED: Final = "CRC byte order swapped (high byte first)"
-NO_REQUEST: Final = "read response without a known request: registers unknown"
-UNTRUSTED: Final = "registers named from a request with a CRC error"
 
 FUNCTION_NAME: Final[dict[int, str]] = {
     READ_COILS: "READ_COILS",
@@ -87,7 +84,7 @@ Entry = tuple[
     Pending | None,
     tuple[str, ...],
 ]
-_RANGE_FLAG: Final = (F.OUT_OF_RANGE,)
+_RANGE_FLAG: Final = (M.VALUE_OUT_OF_RANGE.code,)
 
 
 def _direction(raw: bytes, pending: Pending | None, hint: str | None) -> str | None:
@@ -172,14 +169,14 @@ def _shapeless(raw: bytes) -> Entry | None:
     n = len(raw)
     if n < 4:
         fields: dict[str, Any] = {"slave": raw[0] if raw else None}
-        error = f"frame too short ({n} bytes)"
+        error = M.MODBUS_TOO_SHORT.text(length=n)
     else:
         kind = KIND[raw[1]]
         if kind and n in candidates(raw, 0, n, kind, False):
             return None
         what = FUNCTION_TEXT.get(raw[1] & 0x7F, f"function 0x{raw[1]:02X}") if kind else ""
         fields = {"slave": raw[0], "function": raw[1] & 0x7F}
-        error = f"{n} bytes are no Modbus frame shape ({what or f'code 0x{raw[1]:02X}'})"
+        error = M.MODBUS_NO_SHAPE.text(length=n, what=what or f"code 0x{raw[1]:02X}")
     return (None, None, fields, "", (error,), (), None, False, False, None, (F.MALFORMED,))
 
 
@@ -220,12 +217,11 @@ def _decode(raw: bytes, pending: Pending | None, hint: str | None, crc: int | No
 def _note_crc(raw: bytes, crc: int, notes: Notes) -> None:
     """A CRC that fails, or holds with its two bytes swapped, is noted."""
     if crc == CRC_SWAPPED_ORDER:
-        notes.warn(F.SWAPPED_CRC, CRC_SWAPPED)
+        notes.warn_of(M.MODBUS_CRC_SWAPPED)
     elif crc == CRC_BAD:
         c = crc16(raw[:-2])
-        notes.error(
-            F.BAD_CHECKSUM,
-            f"CRC error: expected {c & 0xFF:02X} {c >> 8:02X}, got {raw[-2]:02X} {raw[-1]:02X}",
+        notes.error_of(
+            M.MODBUS_CRC, expected_lo=c & 0xFF, expected_hi=c >> 8, got_lo=raw[-2], got_hi=raw[-1]
         )
 
 
@@ -233,12 +229,9 @@ def _note_unexpected(raw: bytes, kind: int, direction: str | None, notes: Notes)
     """A function the EG2 does not document, or a response from the broadcast address."""
     slave, fc = raw[0], raw[1]
     if kind != KIND_EXCEPTION and fc not in EG2_FUNCTIONS:
-        notes.warn(
-            F.UNDOCUMENTED,
-            f"function {fc} ({FUNCTION_TEXT[fc]}) is not one the EG2 documents (3, 6 and 16)",
-        )
+        notes.warn_of(M.MODBUS_UNDOCUMENTED_FUNCTION, code=fc, name=FUNCTION_TEXT[fc])
     if direction == RESPONSE and slave == BROADCAST:
-        notes.warn(F.BROADCAST, "response from address 0 (broadcast requests get no response)")
+        notes.warn_of(M.MODBUS_BROADCAST_RESPONSE)
 
 
 def _pairing(
@@ -288,7 +281,7 @@ def _exception(raw: bytes, fields: dict[str, Any], notes: Notes) -> tuple[str, s
     notes.flag(F.EXCEPTION_RESPONSE)  # the summary says it in words
     if not text:
         text = f"unknown exception code {code}"
-        notes.warn(F.UNDOCUMENTED, f"exception code {code} is not a standard Modbus exception")
+        notes.warn_of(M.MODBUS_UNKNOWN_EXCEPTION, code=code)
     fields["exception_code"] = code
     fields["exception_text"] = text
     return "EXCEPTION", f"exception {code}: {text}", False
@@ -302,15 +295,14 @@ def _read_request(
         fields["start"] = start
         fields["count"] = count
         if not 1 <= count <= 2000:
-            text = f"count {count} outside the Modbus limit of 1-2000 {what}"
-            notes.warn(F.OUT_OF_RANGE, text)
+            notes.warn_of(M.MODBUS_COUNT, count=count, limit=2000, what=what)
         return FUNCTION_NAME[fc], f"read {count} {what} from {start}"
     p = plan(start, count)
     fields.update(p.extra)
     fields["registers"] = list(p.names)
     p.note(notes)
     if not 1 <= count <= 125:
-        notes.warn(F.OUT_OF_RANGE, f"count {count} outside the Modbus limit of 1-125 registers")
+        notes.warn_of(M.MODBUS_COUNT, count=count, limit=125, what="registers")
     noun = "register" if count == 1 else "registers"
     keys = f" ({p.summary_keys})" if p.summary_keys else ""
     return p.name, f"read {count} {noun} from {p.start}{keys}"
@@ -338,10 +330,9 @@ def _read_response(
         values_raw = words(raw, 3, data_end)
         n = len(values_raw)
         if req is not None:
-            text = f"read response with {n} registers for a request of {req[3]}: registers unknown"
-            notes.warn(F.LENGTH_MISMATCH, text)
+            notes.warn_of(M.MODBUS_READ_LENGTH, count=n, asked=req[3])
         else:
-            notes.warn(F.ORPHAN_RESPONSE, NO_REQUEST)
+            notes.warn_of(M.MODBUS_NO_REQUEST)
         fields["values_raw"] = values_raw
         noun = "value" if n == 1 else "values"
         return None, f"-> {n} {noun} (registers unknown): " + ", ".join(map(str, values_raw))
@@ -349,10 +340,10 @@ def _read_response(
     fields.update(p.extra)
     p.note(notes)
     if not req[4]:
-        notes.warn(F.UNTRUSTED_REQUEST, UNTRUSTED)
+        notes.warn_of(M.MODBUS_UNTRUSTED)
     values, texts, range_warnings = p.values(raw, 3, data_end)
     for text in range_warnings:
-        notes.warn(F.OUT_OF_RANGE, text)
+        notes.warn(M.VALUE_OUT_OF_RANGE.code, text)
     fields["values"] = values
     return p.name, "-> " + texts
 
@@ -372,8 +363,7 @@ def _write_single(
         fields["value"] = word
         state = {0xFF00: "on", 0x0000: "off"}.get(word)
         if state is None:
-            text = f"coil value 0x{word:04X} is neither 0xFF00 (on) nor 0x0000 (off)"
-            notes.warn(F.OUT_OF_RANGE, text)
+            notes.warn_of(M.MODBUS_COIL_VALUE, value=word)
             state = f"0x{word:04X}"
         text = f"coil {addr} {state}"
         if response:
@@ -392,21 +382,23 @@ def _write_single(
     if response:
         return reg.name, _echo(req, addr, word, text, notes), False
     if range_warn is not None:
-        notes.warn(F.OUT_OF_RANGE, range_warn)
+        notes.warn(M.VALUE_OUT_OF_RANGE.code, range_warn)
     if p.read_only is not None:
-        notes.warn(F.READ_ONLY_WRITE, p.read_only)
+        notes.warn(M.MODBUS_READ_ONLY_WRITE.code, p.read_only)
     return reg.name, f"write {text}", reg.number in SAVE_REGISTERS and word == 1
 
 
 def _echo(req: Pending | None, addr: int, word: int, text: str, notes: Notes) -> str:
     if req is None:
-        notes.warn(F.ORPHAN_RESPONSE, "write response without a known request")
+        notes.warn_of(M.MODBUS_WRITE_NO_REQUEST)
         return f"-> echo {text}"
     if req[2] != addr or req[3] != word:
-        notes.warn(
-            F.RESPONSE_MISMATCH,
-            f"the echo differs from the request (address {req[2]} value {req[3]}, "
-            f"echo address {addr} value {word})",
+        notes.warn_of(
+            M.MODBUS_ECHO_DIFFERS,
+            address=req[2],
+            value=req[3],
+            echo_address=addr,
+            echo_value=word,
         )
         return f"-> echo differs: {text}"
     return "-> ok (echo)"
@@ -433,12 +425,12 @@ def _write_multiple(
     fields.update(p.extra)
     p.note(notes)
     if not 1 <= count <= 123:
-        notes.warn(F.OUT_OF_RANGE, f"count {count} outside the Modbus limit of 1-123 registers")
+        notes.warn_of(M.MODBUS_COUNT, count=count, limit=123, what="registers")
     values, texts, range_warnings = p.values(raw, 7, data_end)
     for text in range_warnings:
-        notes.warn(F.OUT_OF_RANGE, text)
+        notes.warn(M.VALUE_OUT_OF_RANGE.code, text)
     if p.read_only is not None:
-        notes.warn(F.READ_ONLY_WRITE, p.read_only)
+        notes.warn(M.MODBUS_READ_ONLY_WRITE.code, p.read_only)
     save = any(values.get(name) == 1 for name in p.save_names)
     fields["values"] = values
     noun = "register" if count == 1 else "registers"
@@ -454,12 +446,14 @@ def _write_multiple_response(
     notes: Notes,
 ) -> tuple[str | None, str]:
     if req is None:
-        notes.warn(F.ORPHAN_RESPONSE, "write response without a known request")
+        notes.warn_of(M.MODBUS_WRITE_NO_REQUEST)
     elif req[2] != start or req[3] != count:
-        notes.warn(
-            F.RESPONSE_MISMATCH,
-            f"the response (start {start}, count {count}) does not match the request "
-            f"(start {req[2]}, count {req[3]})",
+        notes.warn_of(
+            M.MODBUS_WRITE_DIFFERS,
+            start=start,
+            count=count,
+            asked_start=req[2],
+            asked_count=req[3],
         )
     if fc == WRITE_COILS:
         fields["start"] = start

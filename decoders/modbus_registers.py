@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable
-from typing import Any, Final
+from typing import Any
 
-from . import flags as F
+from . import messages as M
 from .modbus_framing import READ_HOLDING
 from .notes import Notes
 from .registers import (
@@ -25,8 +25,6 @@ from .registers import (
     by_modbus,
     undocumented,
 )
-
-SHORT_NOTE: Final = "the host leaves out the 1000 offset, as some clients do"
 
 
 def _register(number: int) -> Register:
@@ -65,26 +63,27 @@ def _map_notes(
     notes = Notes()
     if short:
         if count <= 1:
-            text = f"short register number: {wire_start} means {start} ({SHORT_NOTE})"
+            notes.warn_of(M.MODBUS_SHORT_NUMBER, wire=wire_start, number=start)
         else:
-            text = (
-                f"short register numbers: {wire_start}-{wire_start + count - 1} mean "
-                f"{start}-{start + count - 1} ({SHORT_NOTE})"
+            notes.warn_of(
+                M.MODBUS_SHORT_NUMBERS,
+                wire_first=wire_start,
+                wire_last=wire_start + count - 1,
+                first=start,
+                last=start + count - 1,
             )
-        notes.warn(F.SHORT_REGISTER_NUMBERS, text)
     undoc = [r.number for r in regs if not r.documented and not _outside(r)]
     if undoc:
         what = "register" if len(undoc) == 1 else "registers"
-        notes.warn(F.UNDOCUMENTED, f"undocumented {what} {_spans(undoc)} (not in the manual's map)")
+        notes.warn_of(M.MODBUS_UNDOCUMENTED_REGISTERS, what=what, numbers=_spans(undoc))
     outside = [r.number for r in regs if _outside(r)]
     unlisted = range(start + len(regs), start + count)
     outside += [n for n in unlisted if not FIRST <= n <= LAST]
     if outside:
         if len(outside) == 1:
-            text = f"register {outside[0]} is outside the EG2 register map"
+            notes.warn_of(M.MODBUS_OUTSIDE_MAP, number=outside[0])
         else:
-            text = f"registers {_spans(outside)} are outside the EG2 register map"
-        notes.warn(F.UNDOCUMENTED, text)
+            notes.warn_of(M.MODBUS_OUTSIDE_MAP_SPANS, numbers=_spans(outside))
     return notes
 
 
@@ -148,12 +147,14 @@ class Plan:
         self.notes = notes
         self.warnings = tuple(notes.warnings)
         self.flags = tuple(notes.flags)
-        # what a write to these registers needs to know
+        # what a write to these registers needs to know: MODBUS_READ_ONLY_WRITE's text
         read_only = [f"{r.number} ({r.name})" for r in regs if r.access == "ro"]
         self.read_only: str | None = None
         if read_only:
             what = "register" if len(read_only) == 1 else "registers"
-            self.read_only = f"write to read-only {what} {', '.join(read_only)}"
+            self.read_only = M.MODBUS_READ_ONLY_WRITE.text(
+                what=what, registers=", ".join(read_only)
+            )
         self.save_names = tuple(r.name for r in regs if r.number in SAVE_REGISTERS)
 
     def note(self, notes: Notes) -> None:

@@ -20,17 +20,17 @@ from __future__ import annotations
 
 from typing import Final
 
+from . import messages as M
 from .flags import SHORT_REGISTER_NUMBERS
 from .modbus_framing import CRC_OK, CRC_SWAPPED_ORDER, ModbusFramer, Pending, crc16
-from .modbus_pdu import CRC_SWAPPED, Entry, decode
+from .modbus_pdu import Entry, decode
 from .model import FRAME, MODBUS_RTU, RESPONSE, Record
 
-# the decoder, and what other modules take from here (the CRC for decoders.build, the
-# swapped-CRC warning for the simulator)
-__all__ = ["CRC_SWAPPED", "MEMO_LIMIT", "ModbusRtuDecoder", "crc16"]
+# the decoder, and what other modules take from here (the CRC for decoders.build)
+__all__ = ["MEMO_LIMIT", "ModbusRtuDecoder", "crc16"]
 
 MEMO_LIMIT: Final = 50_000
-_SHORT: Final = "short register number"  # how the numbering warning starts (modbus_pdu._Plan)
+_SHORT: Final = "short register number"  # how MODBUS_SHORT_NUMBER and _NUMBERS start
 
 
 class ModbusRtuDecoder(ModbusFramer):
@@ -117,7 +117,7 @@ class ModbusRtuDecoder(ModbusFramer):
         if slave not in self._short_seen:
             self._short_seen.add(slave)
             return tuple(
-                w.replace(_SHORT, "this host uses " + _SHORT, 1) if w.startswith(_SHORT) else w
+                M.MODBUS_HOST_SHORT_NUMBERS.text(warning=w) if w.startswith(_SHORT) else w
                 for w in warnings
             ), flags
         return (

@@ -28,25 +28,23 @@ from collections.abc import Iterable
 from itertools import count
 from typing import Any
 
-from .flags import CUT_OFF, ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED
+from . import messages as M
 from .model import EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE, Record
 
 # Protocols on which a host has one question open at a time (RS232 question/answer, RS485
 # half duplex): a new request on the bus means the previous one will not be answered.
 ONE_OUTSTANDING = frozenset({EG2_SERIAL, MODBUS_RTU})
 
-RETRANSMITTED = "retransmission: the same request again before the first was answered"
-STOPPED_WAITING = "no response before the capture was stopped"
 # _expire takes from the heap every request due by now plus this, then applies the exact test
 # (now - t > limit): t + limit and now - t may round differently by a few ulps
 _DUE_SLACK_S = 1e-3
 
 
-def _flag(rec: Record, code: str, text: str) -> None:
-    """A warning in words and its code (once per record)."""
-    rec.warnings.append(text)
-    if code not in rec.flags:
-        rec.flags.append(code)
+def _flag(rec: Record, message: M.Message, **values: object) -> None:
+    """A warning in the catalogue's words and its code (once per record)."""
+    rec.warnings.append(message.text(**values))
+    if message.code not in rec.flags:
+        rec.flags.append(message.code)
 
 
 class Pairer:
@@ -134,7 +132,7 @@ class Pairer:
     def flush(self) -> list[Record]:
         """End of stream: every request still waiting was never answered."""
         for key in list(self._pending):
-            self._close(key, "no response before the end of the capture")
+            self._close(key, M.PAIRING_END)
         out = list(self._held)
         self._held.clear()
         self._held_bytes = 0
@@ -145,7 +143,7 @@ class Pairer:
         cannot be seen any more. They are flagged and released, so the records before a gap
         come out before it."""
         for key in [k for k in self._pending if k[0] == bus]:
-            self._close(key, "no response before the source was lost")
+            self._close(key, M.PAIRING_SOURCE_LOST)
         return self._release()
 
     def cut_off(self, bus: str | None = None) -> list[Record]:
@@ -153,7 +151,7 @@ class Pairer:
         are flagged ``cut_off``, not ``unanswered`` (their answers may have come after the
         stop), and released. With ``bus`` None nothing is held afterwards."""
         for key in [k for k in self._pending if bus is None or k[0] == bus]:
-            self._close(key, STOPPED_WAITING, CUT_OFF)
+            self._close(key, M.PAIRING_STOPPED)
         return self._release()
 
     def waiting_before(self, position: int) -> bool:
@@ -176,14 +174,14 @@ class Pairer:
         key = self._key(rec)
         same = self._pending.get(key)
         if same is not None and key not in self._answered and rec.raw == same[0].raw:
-            _flag(rec, RETRANSMISSION, RETRANSMITTED)
+            _flag(rec, M.PAIRING_RETRANSMISSION)
             same.append(rec)
         else:
             if rec.protocol in ONE_OUTSTANDING:
                 for other in [k for k in self._pending if k[0] == rec.bus and k[1] == rec.protocol]:
-                    self._close(other, "no response before the next request")
+                    self._close(other, M.PAIRING_NEXT_REQUEST)
             elif same is not None:
-                self._close(key, "no response before the next request with the same ID")
+                self._close(key, M.PAIRING_NEXT_SAME_ID)
             if not rec.expects_response:
                 return
             self._pending[key] = [rec]
@@ -198,7 +196,7 @@ class Pairer:
         key = self._key(rec)
         requests = self._pending.get(key)
         if requests is None:
-            _flag(rec, ORPHAN_RESPONSE, "response without a request")
+            _flag(rec, M.PAIRING_NO_REQUEST)
             return
         req = requests[0]  # answers come in the order the copies were sent
         if len(requests) == 1:
@@ -224,7 +222,7 @@ class Pairer:
             if id(req) not in waiting:
                 continue  # answered or dropped since
             if now - t > limit:
-                self._drop(key, req, f"no response within {limit * 1000:.0f} ms")
+                self._drop(key, req, M.PAIRING_TIMEOUT, ms=limit * 1000)
             else:
                 later.append(entry)
         for entry in later:
@@ -233,16 +231,16 @@ class Pairer:
             heapq.heappop(due)
         self._next_expiry = due[0][0] if due else float("inf")
 
-    def _close(self, key: tuple[Any, ...], why: str, code: str = UNANSWERED) -> None:
+    def _close(self, key: tuple[Any, ...], why: M.Message) -> None:
         """No more answers will come for the requests waiting on key."""
         for req in list(self._pending[key]):
-            self._drop(key, req, why, code)
+            self._drop(key, req, why)
 
-    def _drop(self, key: tuple[Any, ...], req: Record, why: str, code: str = UNANSWERED) -> None:
-        """A waiting request will not be answered (``code``: why, as a flag): say so on it
+    def _drop(self, key: tuple[Any, ...], req: Record, why: M.Message, **values: object) -> None:
+        """A waiting request will not be answered (``why``, with its flag): say so on it
         (unless an earlier copy of it was answered) and stop waiting."""
         if key not in self._answered:
-            _flag(req, code, why)
+            _flag(req, why, **values)
         requests = self._pending[key]
         # by identity, not ==: the copies of a request are equal records
         del requests[next(i for i, r in enumerate(requests) if r is req)]
@@ -264,6 +262,6 @@ class Pairer:
         elif self._over_limit():
             # bound memory: give up on the oldest request rather than hold the stream
             head = held[0]
-            self._drop(self._key(head), head, "no response within the pairing window")
+            self._drop(self._key(head), head, M.PAIRING_WINDOW)
             out += self._release()
         return out

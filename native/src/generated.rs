@@ -732,6 +732,119 @@ pub mod messages {
         };
     }
     pub(crate) use value_out_of_range;
+    /// `MODBUS_COUNT`: `modbus_count!(count = .., limit = .., what = ..)`
+    macro_rules! modbus_count {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::OUT_OF_RANGE,
+                format!("count {count} outside the Modbus limit of 1-{limit} {what}", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_count;
+    /// `MODBUS_COIL_VALUE`: `modbus_coil_value!(value = ..)`
+    macro_rules! modbus_coil_value {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::OUT_OF_RANGE,
+                format!(
+                    "coil value 0x{value:04X} is neither 0xFF00 (on) nor 0x0000 (off)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_coil_value;
+
+    // garbage
+    /// `FRAMING_GARBAGE`: `framing_garbage!(length = .., why = ..)`
+    macro_rules! framing_garbage {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::GARBAGE,
+                format!("garbage: {length} bytes belong to no frame ({why})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use framing_garbage;
+
+    // truncated
+    /// `FRAMING_TRUNCATED`: `framing_truncated!(length = ..)`
+    macro_rules! framing_truncated {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::TRUNCATED,
+                format!("truncated frame: stream ended after {length} bytes", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use framing_truncated;
+    /// `SERIAL_TRUNCATED_HEADER`: `serial_truncated_header!(length = ..)`
+    macro_rules! serial_truncated_header {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::TRUNCATED,
+                format!(
+                    "truncated frame: stream ended {length} bytes in, before the length byte",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use serial_truncated_header;
+    /// `SERIAL_TRUNCATED_BODY`: `serial_truncated_body!(len_byte = .., needed = .., length = ..)`
+    macro_rules! serial_truncated_body {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::TRUNCATED,
+                format!(
+                    "truncated frame: LEN {len_byte} needs {needed} bytes, stream ended after {length}",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use serial_truncated_body;
+    /// `MODBUS_TRUNCATED`: `modbus_truncated!(bytes = ..)`
+    macro_rules! modbus_truncated {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::TRUNCATED,
+                format!("truncated frame: the stream ended after {bytes}", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_truncated;
+    /// `MODBUS_TRUNCATED_FUNCTION`: `modbus_truncated_function!(bytes = .., what = ..)`
+    macro_rules! modbus_truncated_function {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::TRUNCATED,
+                format!("truncated frame: the stream ended after {bytes} ({what})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_truncated_function;
+    /// `MODBUS_TRUNCATED_LENGTHS`: `modbus_truncated_lengths!(length = .., lengths = .., what = ..)`
+    macro_rules! modbus_truncated_lengths {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::TRUNCATED,
+                format!(
+                    "truncated frame: the stream ended after {length} of {lengths} bytes ({what})",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_truncated_lengths;
+
+    // cut_off
+    /// `PAIRING_STOPPED`
+    pub const PAIRING_STOPPED: (&str, &str) = (
+        super::flags::CUT_OFF,
+        "no response before the capture was stopped",
+    );
 
     // malformed
     /// `SERIAL_FRAME_SHAPE`: `serial_frame_shape!(length = ..)`
@@ -757,6 +870,66 @@ pub mod messages {
         };
     }
     pub(crate) use serial_layout;
+    /// `MODBUS_TOO_SHORT`: `modbus_too_short!(length = ..)`
+    macro_rules! modbus_too_short {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::MALFORMED,
+                format!("frame too short ({length} bytes)", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_too_short;
+    /// `MODBUS_NO_SHAPE`: `modbus_no_shape!(length = .., what = ..)`
+    macro_rules! modbus_no_shape {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::MALFORMED,
+                format!("{length} bytes are no Modbus frame shape ({what})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_no_shape;
+    /// `CAN_NO_DATA`: `can_no_data!(what = ..)`
+    macro_rules! can_no_data {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::MALFORMED,
+                format!("{what} frame without data: neither a request nor a response", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_no_data;
+    /// `CAN_ID_TOO_WIDE`: `can_id_too_wide!(id = .., bits = ..)`
+    macro_rules! can_id_too_wide {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::MALFORMED,
+                format!("identifier {id:#x} does not fit in {bits} bits", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_id_too_wide;
+    /// `CAN_TOO_LONG`: `can_too_long!(length = ..)`
+    macro_rules! can_too_long {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::MALFORMED,
+                format!("{length} data bytes in a classic CAN frame", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_too_long;
+    /// `CAN_DLC_MISMATCH`: `can_dlc_mismatch!(dlc = .., length = ..)`
+    macro_rules! can_dlc_mismatch {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::MALFORMED,
+                format!("DLC {dlc} with {length} data bytes", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_dlc_mismatch;
 
     // bad_checksum
     /// `SERIAL_CHECKSUM`: `serial_checksum!(expected = .., got = ..)`
@@ -769,10 +942,28 @@ pub mod messages {
         };
     }
     pub(crate) use serial_checksum;
+    /// `MODBUS_CRC`: `modbus_crc!(expected_lo = .., expected_hi = .., got_lo = .., got_hi = ..)`
+    macro_rules! modbus_crc {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::BAD_CHECKSUM,
+                format!(
+                    "CRC error: expected {expected_lo:02X} {expected_hi:02X}, got {got_lo:02X} {got_hi:02X}",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_crc;
 
     // invalid_id
     /// `SERIAL_ID_ZERO`
     pub const SERIAL_ID_ZERO: (&str, &str) = (super::flags::INVALID_ID, "ID 0 is not a valid ID");
+    /// `CAN_DEVICE_ZERO`
+    pub const CAN_DEVICE_ZERO: (&str, &str) = (
+        super::flags::INVALID_ID,
+        "device 0 is outside the settable IDs 1-16382",
+    );
 
     // broadcast
     /// `SERIAL_BROADCAST_RESPONSE`
@@ -784,6 +975,11 @@ pub mod messages {
     pub const SERIAL_SET_ID_BROADCAST: (&str, &str) = (
         super::flags::BROADCAST,
         "set ID sent to broadcast: every gripper on the bus takes the new ID",
+    );
+    /// `MODBUS_BROADCAST_RESPONSE`
+    pub const MODBUS_BROADCAST_RESPONSE: (&str, &str) = (
+        super::flags::BROADCAST,
+        "response from address 0 (broadcast requests get no response)",
     );
 
     // undocumented
@@ -810,6 +1006,92 @@ pub mod messages {
         };
     }
     pub(crate) use serial_unknown_status;
+    /// `MODBUS_UNDOCUMENTED_FUNCTION`: `modbus_undocumented_function!(code = .., name = ..)`
+    macro_rules! modbus_undocumented_function {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!(
+                    "function {code} ({name}) is not one the EG2 documents (3, 6 and 16)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_undocumented_function;
+    /// `MODBUS_UNKNOWN_EXCEPTION`: `modbus_unknown_exception!(code = ..)`
+    macro_rules! modbus_unknown_exception {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!("exception code {code} is not a standard Modbus exception", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_unknown_exception;
+    /// `MODBUS_UNDOCUMENTED_REGISTERS`: `modbus_undocumented_registers!(what = .., numbers = ..)`
+    macro_rules! modbus_undocumented_registers {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!("undocumented {what} {numbers} (not in the manual's map)", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_undocumented_registers;
+    /// `MODBUS_OUTSIDE_MAP`: `modbus_outside_map!(number = ..)`
+    macro_rules! modbus_outside_map {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!("register {number} is outside the EG2 register map", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_outside_map;
+    /// `MODBUS_OUTSIDE_MAP_SPANS`: `modbus_outside_map_spans!(numbers = ..)`
+    macro_rules! modbus_outside_map_spans {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!("registers {numbers} are outside the EG2 register map", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_outside_map_spans;
+    /// `CAN_UNDOCUMENTED_ADDRESS`: `can_undocumented_address!(address = .., number = ..)`
+    macro_rules! can_undocumented_address {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!("undocumented address {address} (register {number})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_undocumented_address;
+    /// `CAN_OUTSIDE_MAP`: `can_outside_map!(address = .., first = .., last = ..)`
+    macro_rules! can_outside_map {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!("address {address} is outside the register map ({first}-{last})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_outside_map;
+    /// `CAN_RAW_OPERATION`: `can_raw_operation!(op = .., name = ..)`
+    macro_rules! can_raw_operation {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNDOCUMENTED,
+                format!(
+                    "operation {op} ({name}): the manual gives no payload layout, shown raw",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use can_raw_operation;
 
     // write_failed
     /// `SERIAL_WRITE_FAILED`
@@ -829,4 +1111,307 @@ pub mod messages {
         };
     }
     pub(crate) use serial_device_fault;
+
+    // swapped_crc
+    /// `MODBUS_CRC_SWAPPED`
+    pub const MODBUS_CRC_SWAPPED: (&str, &str) = (
+        super::flags::SWAPPED_CRC,
+        "CRC byte order swapped (high byte first)",
+    );
+
+    // orphan_response
+    /// `MODBUS_NO_REQUEST`
+    pub const MODBUS_NO_REQUEST: (&str, &str) = (
+        super::flags::ORPHAN_RESPONSE,
+        "read response without a known request: registers unknown",
+    );
+    /// `MODBUS_WRITE_NO_REQUEST`
+    pub const MODBUS_WRITE_NO_REQUEST: (&str, &str) = (
+        super::flags::ORPHAN_RESPONSE,
+        "write response without a known request",
+    );
+    /// `PAIRING_NO_REQUEST`
+    pub const PAIRING_NO_REQUEST: (&str, &str) =
+        (super::flags::ORPHAN_RESPONSE, "response without a request");
+
+    // length_mismatch
+    /// `MODBUS_READ_LENGTH`: `modbus_read_length!(count = .., asked = ..)`
+    macro_rules! modbus_read_length {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::LENGTH_MISMATCH,
+                format!(
+                    "read response with {count} registers for a request of {asked}: registers unknown",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_read_length;
+    /// `CAN_LENGTH_MISMATCH`: `can_length_mismatch!(asked = .., length = ..)`
+    macro_rules! can_length_mismatch {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::LENGTH_MISMATCH,
+                format!(
+                    "response length mismatch: the pending request asked for {asked}, the response carries {length}",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use can_length_mismatch;
+
+    // response_mismatch
+    /// `MODBUS_ECHO_DIFFERS`: `modbus_echo_differs!(address = .., value = .., echo_address = .., echo_value = ..)`
+    macro_rules! modbus_echo_differs {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::RESPONSE_MISMATCH,
+                format!(
+                    "the echo differs from the request (address {address} value {value}, echo address {echo_address} value {echo_value})",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_echo_differs;
+    /// `MODBUS_WRITE_DIFFERS`: `modbus_write_differs!(start = .., count = .., asked_start = .., asked_count = ..)`
+    macro_rules! modbus_write_differs {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::RESPONSE_MISMATCH,
+                format!(
+                    "the response (start {start}, count {count}) does not match the request (start {asked_start}, count {asked_count})",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_write_differs;
+
+    // untrusted_request
+    /// `MODBUS_UNTRUSTED`
+    pub const MODBUS_UNTRUSTED: (&str, &str) = (
+        super::flags::UNTRUSTED_REQUEST,
+        "registers named from a request with a CRC error",
+    );
+
+    // short_register_numbers
+    /// `MODBUS_SHORT_NUMBER`: `modbus_short_number!(wire = .., number = ..)`
+    macro_rules! modbus_short_number {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::SHORT_REGISTER_NUMBERS,
+                format!(
+                    "short register number: {wire} means {number} (the host leaves out the 1000 offset, as some clients do)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_short_number;
+    /// `MODBUS_SHORT_NUMBERS`: `modbus_short_numbers!(wire_first = .., wire_last = .., first = .., last = ..)`
+    macro_rules! modbus_short_numbers {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::SHORT_REGISTER_NUMBERS,
+                format!(
+                    "short register numbers: {wire_first}-{wire_last} mean {first}-{last} (the host leaves out the 1000 offset, as some clients do)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use modbus_short_numbers;
+    /// `MODBUS_HOST_SHORT_NUMBERS`: `modbus_host_short_numbers!(warning = ..)`
+    macro_rules! modbus_host_short_numbers {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::SHORT_REGISTER_NUMBERS,
+                format!("this host uses {warning}", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_host_short_numbers;
+
+    // read_only_write
+    /// `MODBUS_READ_ONLY_WRITE`: `modbus_read_only_write!(what = .., registers = ..)`
+    macro_rules! modbus_read_only_write {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::READ_ONLY_WRITE,
+                format!("write to read-only {what} {registers}", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use modbus_read_only_write;
+    /// `CAN_READ_ONLY_WRITE`: `can_read_only_write!(name = .., key = ..)`
+    macro_rules! can_read_only_write {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::READ_ONLY_WRITE,
+                format!("write to read-only register {name} ({key})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_read_only_write;
+
+    // odd_span
+    /// `CAN_ODD_START`: `can_odd_start!(address = .., register = .., register_address = ..)`
+    macro_rules! can_odd_start {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::ODD_SPAN,
+                format!(
+                    "odd start address {address}: the first byte is the high byte of {register} (address {register_address})",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use can_odd_start;
+    /// `CAN_ODD_END`: `can_odd_end!(bytes = .., address = .., register = .., register_address = ..)`
+    macro_rules! can_odd_end {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::ODD_SPAN,
+                format!(
+                    "the span ends inside a register ({bytes} from {address}): the last byte is the low byte of {register} (address {register_address})",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use can_odd_end;
+    /// `CAN_ODD_LENGTH`: `can_odd_length!(length = ..)`
+    macro_rules! can_odd_length {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::ODD_SPAN,
+                format!("odd length {length}: registers are 2 bytes", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_odd_length;
+
+    // ambiguous_direction
+    /// `CAN_MAYBE_READ_REQUEST`: `can_maybe_read_request!(bytes = ..)`
+    macro_rules! can_maybe_read_request {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::AMBIGUOUS_DIRECTION,
+                format!(
+                    "could also be a repeated read request of {bytes} (taken as the response to the pending request)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use can_maybe_read_request;
+    /// `CAN_MAYBE_WRITE_RESPONSE`: `can_maybe_write_response!(bytes = ..)`
+    macro_rules! can_maybe_write_response {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::AMBIGUOUS_DIRECTION,
+                format!(
+                    "could also be the response to a write of {bytes} whose request was not seen",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use can_maybe_write_response;
+
+    // foreign
+    /// `CAN_REMOTE_FRAME`
+    pub const CAN_REMOTE_FRAME: (&str, &str) = (super::flags::FOREIGN, "remote frame");
+
+    // can_error_frame
+    /// `CAN_ERROR_FRAME`
+    pub const CAN_ERROR_FRAME: (&str, &str) = (super::flags::CAN_ERROR_FRAME, "CAN error frame");
+    /// `CAN_ERROR_FRAME_CLASSES`: `can_error_frame_classes!(classes = .., error_class = ..)`
+    macro_rules! can_error_frame_classes {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::CAN_ERROR_FRAME,
+                format!("CAN error frame: {classes} (class 0x{error_class:03X})", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use can_error_frame_classes;
+
+    // retransmission
+    /// `PAIRING_RETRANSMISSION`
+    pub const PAIRING_RETRANSMISSION: (&str, &str) = (
+        super::flags::RETRANSMISSION,
+        "retransmission: the same request again before the first was answered",
+    );
+
+    // unanswered
+    /// `PAIRING_NEXT_REQUEST`
+    pub const PAIRING_NEXT_REQUEST: (&str, &str) = (
+        super::flags::UNANSWERED,
+        "no response before the next request",
+    );
+    /// `PAIRING_NEXT_SAME_ID`
+    pub const PAIRING_NEXT_SAME_ID: (&str, &str) = (
+        super::flags::UNANSWERED,
+        "no response before the next request with the same ID",
+    );
+    /// `PAIRING_TIMEOUT`: `pairing_timeout!(ms = ..)`
+    macro_rules! pairing_timeout {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::UNANSWERED,
+                format!("no response within {ms:.0} ms", $($arg)*),
+            )
+        };
+    }
+    pub(crate) use pairing_timeout;
+    /// `PAIRING_WINDOW`
+    pub const PAIRING_WINDOW: (&str, &str) = (
+        super::flags::UNANSWERED,
+        "no response within the pairing window",
+    );
+    /// `PAIRING_END`
+    pub const PAIRING_END: (&str, &str) = (
+        super::flags::UNANSWERED,
+        "no response before the end of the capture",
+    );
+    /// `PAIRING_SOURCE_LOST`
+    pub const PAIRING_SOURCE_LOST: (&str, &str) = (
+        super::flags::UNANSWERED,
+        "no response before the source was lost",
+    );
+
+    // during_save
+    /// `LINT_DURING_SAVE`: `lint_during_save!(ms = .., wait = ..)`
+    macro_rules! lint_during_save {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::DURING_SAVE,
+                format!(
+                    "command {ms:.0} ms after a parameter save (the manual asks to wait more than {wait} s)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use lint_during_save;
+
+    // closer_than_5ms
+    /// `LINT_TOO_CLOSE`: `lint_too_close!(ms = .., min_gap_ms = ..)`
+    macro_rules! lint_too_close {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::CLOSER_THAN_5MS,
+                format!(
+                    "command {ms:.2} ms after the previous one to this device (the manual asks for at least {min_gap_ms:.0} ms)",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use lint_too_close;
 }

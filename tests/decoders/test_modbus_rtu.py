@@ -22,6 +22,7 @@ from pymodbus.pdu import register_message as rm
 
 from decoders import build as b
 from decoders import flags as F
+from decoders import messages as M
 from decoders import modbus_framing, modbus_pdu, modbus_registers, modbus_rtu
 from decoders.build import with_crc
 from decoders.framing import NEED_MORE
@@ -33,9 +34,11 @@ from decoders.modbus_framing import (
     candidates,
     crc_state,
 )
-from decoders.modbus_pdu import CRC_SWAPPED, NO_REQUEST
 from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import FRAME, GARBAGE, MODBUS_RTU, REQUEST, RESPONSE, TRUNCATED, Chunk, Record
+
+CRC_SWAPPED = M.MODBUS_CRC_SWAPPED.text()
+NO_REQUEST = M.MODBUS_NO_REQUEST.text()
 
 
 def h(text: str) -> bytes:

@@ -16,10 +16,12 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::decoders::flags as F;
 use crate::decoders::model::{
-    CanFrame, Fields, PairKey, Record, SharedFields, Str, Text, Value, EG2_CAN, FOREIGN_CAN, FRAME,
+    CanFrame, Fields, Notes, PairKey, Record, SharedFields, Str, Text, Value, EG2_CAN, FOREIGN_CAN,
+    FRAME,
 };
 use crate::decoders::model::{REQUEST, RESPONSE};
 use crate::decoders::registers::{self, by_can_address, fault_text, state_text, RegRef, Register};
+use crate::generated::messages as M;
 
 pub use crate::generated::can::{
     BROADCAST, CAN_ERR_CLASSES, MAP_FIRST, MAP_LAST, MAX_ID, MEMO_LIMIT, OPERATIONS, OP_READ,
@@ -56,12 +58,9 @@ pub fn can_error_text(error_class: u32) -> String {
         .map(|(_, text)| *text)
         .collect();
     if words.is_empty() {
-        return "CAN error frame".to_string();
+        return M::CAN_ERROR_FRAME.1.to_string();
     }
-    format!(
-        "CAN error frame: {} (class 0x{error_class:03X})",
-        words.join(", ")
-    )
+    M::can_error_frame_classes!(classes = words.join(", "), error_class = error_class).1
 }
 
 /// A read request's or write response's shape: one count byte 1-8, or 8 bytes zero padded.
@@ -295,75 +294,44 @@ fn register_names(regs: &[RegRef]) -> Value {
     Value::List(regs.iter().map(|r| Value::Str(r.name.clone())).collect())
 }
 
-/// Errors, warnings and flags found while building one frame's decode (decoders/notes.py).
-#[derive(Clone, Debug, Default)]
-struct Notes {
-    errors: Vec<String>,
-    warnings: Vec<String>,
-    flags: Vec<&'static str>,
-}
-
-impl Notes {
-    fn error(&mut self, code: &'static str, text: String) {
-        self.errors.push(text);
-        self.flag(code);
-    }
-    fn warn(&mut self, code: &'static str, text: String) {
-        self.warnings.push(text);
-        self.flag(code);
-    }
-    fn flag(&mut self, code: &'static str) {
-        if !self.flags.contains(&code) {
-            self.flags.push(code);
-        }
-    }
-}
-
 /// Flag how a span is laid out: odd address or length, unknown or read-only registers.
 fn span_warnings(address: i64, n: i64, regs: &[RegRef], write: bool, notes: &mut Notes) {
     if address & 1 != 0 {
         let reg = register_at(address - 1);
-        notes.warn(
-            F::ODD_SPAN,
-            format!(
-                "odd start address {address}: the first byte is the high byte of {} (address {})",
-                reg.name,
-                address - 1
-            ),
-        );
+        notes.warn_of(M::can_odd_start!(
+            address = address,
+            register = reg.name,
+            register_address = address - 1
+        ));
     }
     if (address + n) & 1 != 0 && n > 0 {
         let reg = register_at(address + n - 1);
-        notes.warn(
-            F::ODD_SPAN,
-            format!(
-                "the span ends inside a register ({} from {address}): the last byte is the low \
-                 byte of {} (address {})",
-                plural(n as usize),
-                reg.name,
-                address + n - 1
-            ),
-        );
+        notes.warn_of(M::can_odd_end!(
+            bytes = plural(n as usize),
+            address = address,
+            register = reg.name,
+            register_address = address + n - 1
+        ));
     } else if n & 1 != 0 {
-        notes.warn(
-            F::ODD_SPAN,
-            format!("odd length {n}: registers are 2 bytes"),
-        );
+        notes.warn_of(M::can_odd_length!(length = n));
     }
     for reg in regs {
         if !reg.documented {
             let a = reg.can_address();
-            let text = if (MAP_FIRST..=MAP_LAST).contains(&a) {
-                format!("undocumented address {a} (register {})", reg.number)
+            if (MAP_FIRST..=MAP_LAST).contains(&a) {
+                notes.warn_of(M::can_undocumented_address!(
+                    address = a,
+                    number = reg.number
+                ));
             } else {
-                format!("address {a} is outside the register map ({MAP_FIRST}-{MAP_LAST})")
-            };
-            notes.warn(F::UNDOCUMENTED, text);
+                notes.warn_of(M::can_outside_map!(
+                    address = a,
+                    first = MAP_FIRST,
+                    last = MAP_LAST
+                ));
+            }
         } else if write && reg.access == "ro" {
-            notes.warn(
-                F::READ_ONLY_WRITE,
-                format!("write to read-only register {} ({})", reg.name, reg.key),
-            );
+            notes.warn_of(M::can_read_only_write!(name = reg.name, key = reg.key));
         }
     }
 }
@@ -460,10 +428,7 @@ fn id_fields(aid: u32, n: usize) -> (Fields, Notes) {
     ];
     let mut notes = Notes::default();
     if device == 0 {
-        notes.warn(
-            F::INVALID_ID,
-            "device 0 is outside the settable IDs 1-16382".to_string(),
-        );
+        notes.warn_of(M::CAN_DEVICE_ZERO);
     }
     if device == BROADCAST {
         fields.push((Cow::Borrowed("broadcast"), Value::Bool(true)));
@@ -482,14 +447,7 @@ fn make_layout(aid: u32, n: usize, tag: u32) -> Layout {
     let write = op == OP_WRITE;
     if tag >= TAG_MISMATCH {
         let asked = (tag - TAG_MISMATCH) as usize;
-        notes.warn(
-            F::LENGTH_MISMATCH,
-            format!(
-                "response length mismatch: the pending request asked for {}, the response \
-                 carries {n}",
-                plural(asked)
-            ),
-        );
+        notes.warn_of(M::can_length_mismatch!(asked = plural(asked), length = n));
     }
     span_warnings(address, n as i64, &regs, write, &mut notes);
     let head = if address & 1 != 0 {
@@ -553,10 +511,7 @@ fn build_other(aid: u32, data: &[u8], tag: u32) -> Template {
     } else if op == OP_READ || op == OP_WRITE {
         // no data at all
         let what = if op == OP_READ { "read" } else { "write" };
-        notes.error(
-            F::MALFORMED,
-            format!("{what} frame without data: neither a request nor a response"),
-        );
+        notes.error_of(M::can_no_data!(what = what));
         summary = format!("{what} at {address}: no data");
     } else {
         (name, summary) = raw_operation(op, address, data, &mut fields, &mut notes);
@@ -620,10 +575,7 @@ fn raw_operation(
 ) -> (Option<Str>, String) {
     let opname = OPERATIONS[op as usize];
     fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
-    notes.warn(
-        F::UNDOCUMENTED,
-        format!("operation {op} ({opname}): the manual gives no payload layout, shown raw"),
-    );
+    notes.warn_of(M::can_raw_operation!(op = op, name = opname));
     let mut s = format!("{opname} at {address} [{}] ", data.len());
     push_hex(&mut s, data);
     (Some(Cow::Borrowed(opname)), s.trim_end().to_string())
@@ -661,17 +613,12 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
     } else {
         let limit = if extended { MAX_ID } else { 0x7FF };
         if aid > limit {
-            notes.warn(
-                F::MALFORMED,
-                format!(
-                    "identifier {aid:#x} does not fit in {} bits",
-                    if extended { 29 } else { 11 }
-                ),
-            );
+            let bits = if extended { 29 } else { 11 };
+            notes.warn_of(M::can_id_too_wide!(id = aid, bits = bits));
         }
         if frame.is_remote {
             // not EG2 (it sends data frames only): the code is the record's own foreign
-            notes.warn(F::FOREIGN, "remote frame".to_string());
+            notes.warn_of(M::CAN_REMOTE_FRAME);
             summary = format!("remote {kind} {ident} [{length}]");
         } else {
             let title = format!("{kind} {ident}");
@@ -699,7 +646,7 @@ fn build_foreign(frame: &CanFrame, length: usize, filtered: bool) -> Template {
 /// Summary of a CAN error frame (aid: its error class); its problem is noted (`_error_frame`).
 fn error_frame(aid: u32, data: &[u8], fields: &mut Fields, notes: &mut Notes) -> String {
     let text = can_error_text(aid);
-    notes.error(F::CAN_ERROR_FRAME, text.clone());
+    notes.error(F::CAN_ERROR_FRAME, text.clone()); // can_error_text: the catalogue's words
     fields.push((Cow::Borrowed("error_class"), Value::Int(aid as i64)));
     fields.push((Cow::Borrowed("data"), Value::from(hex_upper(data))));
     let mut s = format!("{text} [{}] ", data.len());
@@ -722,19 +669,10 @@ fn data_frame(
         fields.push((Cow::Borrowed("fd"), Value::Bool(true)));
         title.insert_str(0, "FD ");
     } else if data.len() > 8 {
-        notes.warn(
-            F::MALFORMED,
-            format!("{} data bytes in a classic CAN frame", data.len()),
-        );
+        notes.warn_of(M::can_too_long!(length = data.len()));
     } else if frame.dlc.is_some_and(|d| d != data.len()) {
-        notes.warn(
-            F::MALFORMED,
-            format!(
-                "DLC {} with {} data bytes",
-                frame.dlc.unwrap_or(0),
-                data.len()
-            ),
-        );
+        let dlc = frame.dlc.unwrap_or(0);
+        notes.warn_of(M::can_dlc_mismatch!(dlc = dlc, length = data.len()));
     } else if frame.is_extended && filtered && aid < RESERVED_BIT {
         // left out by the decoder's device filter
         fields.push((
@@ -998,19 +936,11 @@ impl Parts {
 /// A value-carrying frame shaped like a count could also be the other direction
 /// (`_note_ambiguity`).
 fn note_ambiguity(layout: &Layout, count: usize, notes: &mut Notes) {
-    let text = if layout.read {
-        format!(
-            "could also be a repeated read request of {} (taken as the response to the \
-             pending request)",
-            plural(count)
-        )
+    if layout.read {
+        notes.warn_of(M::can_maybe_read_request!(bytes = plural(count)));
     } else {
-        format!(
-            "could also be the response to a write of {} whose request was not seen",
-            plural(count)
-        )
-    };
-    notes.warn(F::AMBIGUOUS_DIRECTION, text);
+        notes.warn_of(M::can_maybe_write_response!(bytes = plural(count)));
+    }
 }
 
 /// One byte of a register whose other half lies outside the frame (`_half_byte`).

@@ -735,17 +735,10 @@ impl Framing for Eg2Serial {
 
     fn truncated_reason(&self, raw: &[u8]) -> String {
         if raw.len() < 4 {
-            return format!(
-                "truncated frame: stream ended {} bytes in, before the length byte",
-                raw.len()
-            );
+            return M::serial_truncated_header!(length = raw.len()).1;
         }
-        format!(
-            "truncated frame: LEN {} needs {} bytes, stream ended after {}",
-            raw[3],
-            raw[3] as usize + 5,
-            raw.len()
-        )
+        let needed = raw[3] as usize + 5;
+        M::serial_truncated_body!(len_byte = raw[3], needed = needed, length = raw.len()).1
     }
 }
 

@@ -21,6 +21,7 @@
 
 use crate::decoders::flags;
 use crate::decoders::model::{Record, GARBAGE, TRUNCATED};
+use crate::generated::messages as M;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -155,7 +156,7 @@ pub trait Framing {
     ) -> Record;
 
     fn truncated_reason(&self, raw: &[u8]) -> String {
-        format!("truncated frame: stream ended after {} bytes", raw.len())
+        M::framing_truncated!(length = raw.len()).1
     }
 }
 
@@ -458,12 +459,8 @@ impl<P: Framing> ByteStreamDecoder<P> {
         let n = raw.len();
         let mut rec = Record::new(None, s.bus.clone(), P::PROTOCOL, GARBAGE, raw);
         rec.offset = Some(s.base + lo as u64);
-        rec.errors.push(format!(
-            "garbage: {n} bytes belong to no frame ({})",
-            self.garbage_why
-        ));
+        rec.error_of(M::framing_garbage!(length = n, why = self.garbage_why));
         rec.summary = format!("{n} garbage bytes").into();
-        rec.flags.push(flags::GARBAGE);
         s.stamp(&mut rec);
         rec
     }

@@ -6,11 +6,10 @@
 //!
 //! Both need timestamps; records without `t` pass untouched (raw byte dumps have none).
 
-use crate::decoders::flags::{CLOSER_THAN_5MS, DURING_SAVE};
 use crate::decoders::model::{Record, FRAME, REQUEST};
 use crate::decoders::pairing::StreamIds;
+use crate::generated::messages as M;
 use crate::hash::FastMap;
-use crate::pyfloat::py_fixed;
 
 pub use crate::generated::lint::{AFTER_SAVE_S, MIN_GAP_S};
 
@@ -27,7 +26,7 @@ pub struct TimingLinter {
 
 impl TimingLinter {
     /// The linter with the manual's limits (the only ones the pipeline uses: the texts below
-    /// print them as the Python's `f"{MIN_GAP_S * 1000:.0f}"` and `f"{AFTER_SAVE_S:g}"` do).
+    /// print AFTER_SAVE_S as the Python's `f"{after_save_s:g}"` does, 1.0 as "1").
     pub fn new() -> Self {
         Self::default()
     }
@@ -41,24 +40,21 @@ impl TimingLinter {
         if let Some(&saved) = self.save.get(&key) {
             let dt = t - saved;
             if dt < AFTER_SAVE_S {
-                rec.warnings.push(format!(
-                    "command {} ms after a parameter save (the manual asks to wait more than 1 s)",
-                    py_fixed(dt * 1000.0, 0)
-                ));
-                // appended as the Python does (no check for a code already there)
-                rec.flags.push(DURING_SAVE);
+                note(
+                    rec,
+                    M::lint_during_save!(ms = dt * 1000.0, wait = AFTER_SAVE_S),
+                );
             } else {
                 self.save.remove(&key);
             }
         }
         if let Some(&last) = self.last.get(&key) {
             if t - last < MIN_GAP_S {
-                rec.warnings.push(format!(
-                    "command {} ms after the previous one to this device (the manual asks for at \
-                     least 5 ms)",
-                    py_fixed((t - last) * 1000.0, 2)
-                ));
-                rec.flags.push(CLOSER_THAN_5MS);
+                let gap_ms = MIN_GAP_S * 1000.0;
+                note(
+                    rec,
+                    M::lint_too_close!(ms = (t - last) * 1000.0, min_gap_ms = gap_ms),
+                );
             }
         }
         self.last.insert(key, t);
@@ -68,9 +64,16 @@ impl TimingLinter {
     }
 }
 
+/// A warning and its code, the code appended even when the record has it (as the Python's).
+fn note(rec: &mut Record, (code, text): (&'static str, String)) {
+    rec.warnings.push(text);
+    rec.flags.push(code);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::decoders::flags::{CLOSER_THAN_5MS, DURING_SAVE};
     use crate::decoders::model::EG2_SERIAL;
     use std::sync::Arc;
 

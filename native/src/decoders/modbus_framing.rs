@@ -10,6 +10,7 @@ use crate::decoders::model::RESPONSE;
 
 use crate::decoders::framing::Stream;
 pub use crate::decoders::framing::NEED_MORE;
+use crate::generated::messages as M;
 
 pub use crate::generated::modbus::{
     function_text, READ_COILS, READ_DISCRETE, READ_HOLDING, READ_INPUT, WRITE_COIL, WRITE_COILS,
@@ -689,31 +690,26 @@ impl ModbusFramer {
 /// The error text of a truncated frame (`ModbusFramer.truncated_reason`).
 pub fn truncated_reason(raw: &[u8]) -> String {
     let n = raw.len();
-    let mut text = format!(
-        "truncated frame: the stream ended after {n} byte{}",
-        if n != 1 { "s" } else { "" }
-    );
+    let got = format!("{n} byte{}", if n != 1 { "s" } else { "" });
     let kind = if n >= 2 { KIND[raw[1] as usize] } else { 0 };
     if kind == 0 {
-        return text;
+        return M::modbus_truncated!(bytes = got).1;
     }
     let func = function_text(raw[1] & 0x7F).expect("a framed function");
+    let what = if kind == KIND_EXCEPTION {
+        format!("exception response to {func}")
+    } else {
+        func.to_string()
+    };
     let (cv, cn) = candidates(raw, 0, n, kind, false);
     let mut lengths: Vec<i64> = cv[..cn].iter().copied().filter(|&c| c > n as i64).collect();
     lengths.sort_unstable();
     lengths.dedup();
-    if !lengths.is_empty() {
-        let joined: Vec<String> = lengths.iter().map(|l| l.to_string()).collect();
-        text = format!(
-            "truncated frame: the stream ended after {n} of {} bytes",
-            joined.join(" or ")
-        );
+    if lengths.is_empty() {
+        return M::modbus_truncated_function!(bytes = got, what = what).1;
     }
-    if kind == KIND_EXCEPTION {
-        format!("{text} (exception response to {func})")
-    } else {
-        format!("{text} ({func})")
-    }
+    let joined: Vec<String> = lengths.iter().map(|l| l.to_string()).collect();
+    M::modbus_truncated_lengths!(length = n, lengths = joined.join(" or "), what = what).1
 }
 
 #[cfg(test)]

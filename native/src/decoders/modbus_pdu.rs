@@ -19,10 +19,7 @@ use crate::decoders::modbus_framing::{
 use crate::decoders::modbus_registers::{words, Memo};
 use crate::decoders::model::{Fields, Notes, PairKey, Str, Value, REQUEST, RESPONSE};
 use crate::decoders::registers::is_save_register;
-
-pub const CRC_SWAPPED: &str = "CRC byte order swapped (high byte first)";
-pub const NO_REQUEST: &str = "read response without a known request: registers unknown";
-pub const UNTRUSTED: &str = "registers named from a request with a CRC error";
+use crate::generated::messages as M;
 
 use crate::generated::modbus::{exception_text, BROADCAST};
 
@@ -106,7 +103,7 @@ fn shapeless(raw: &[u8]) -> Option<Entry> {
         let slave = raw.first().map_or(Value::Null, |&s| int(s));
         (
             vec![(key("slave"), slave)],
-            format!("frame too short ({n} bytes)"),
+            M::modbus_too_short!(length = n).1,
         )
     } else {
         let kind = KIND[raw[1] as usize];
@@ -129,7 +126,7 @@ fn shapeless(raw: &[u8]) -> Option<Entry> {
                 (key("slave"), int(raw[0])),
                 (key("function"), int(raw[1] & 0x7F)),
             ],
-            format!("{n} bytes are no Modbus frame shape ({what})"),
+            M::modbus_no_shape!(length = n, what = what).1,
         )
     };
     Some(Entry {
@@ -204,19 +201,15 @@ pub fn decode(
 fn note_crc(raw: &[u8], crc: u8, notes: &mut Notes) {
     let n = raw.len();
     if crc == CRC_SWAPPED_ORDER {
-        notes.warn(F::SWAPPED_CRC, CRC_SWAPPED.to_string());
+        notes.warn_of(M::MODBUS_CRC_SWAPPED);
     } else if crc == CRC_BAD {
         let c = crc16(&raw[..n - 2]);
-        notes.error(
-            F::BAD_CHECKSUM,
-            format!(
-                "CRC error: expected {:02X} {:02X}, got {:02X} {:02X}",
-                c & 0xFF,
-                c >> 8,
-                raw[n - 2],
-                raw[n - 1]
-            ),
-        );
+        notes.error_of(M::modbus_crc!(
+            expected_lo = c & 0xFF,
+            expected_hi = c >> 8,
+            got_lo = raw[n - 2],
+            got_hi = raw[n - 1]
+        ));
     }
 }
 
@@ -225,19 +218,11 @@ fn note_crc(raw: &[u8], crc: u8, notes: &mut Notes) {
 fn note_unexpected(raw: &[u8], kind: u8, direction: Option<&'static str>, notes: &mut Notes) {
     let (slave, fc) = (raw[0], raw[1]);
     if kind != KIND_EXCEPTION && !is_eg2_function(fc) {
-        notes.warn(
-            F::UNDOCUMENTED,
-            format!(
-                "function {fc} ({}) is not one the EG2 documents (3, 6 and 16)",
-                function_text(fc).expect("a framed function")
-            ),
-        );
+        let name = function_text(fc).expect("a framed function");
+        notes.warn_of(M::modbus_undocumented_function!(code = fc, name = name));
     }
     if direction == Some(RESPONSE) && slave == BROADCAST {
-        notes.warn(
-            F::BROADCAST,
-            "response from address 0 (broadcast requests get no response)".to_string(),
-        );
+        notes.warn_of(M::MODBUS_BROADCAST_RESPONSE);
     }
 }
 
@@ -320,10 +305,7 @@ fn exception(
     let text: Str = match exception_text(code) {
         Some(t) => Cow::Borrowed(t),
         None => {
-            notes.warn(
-                F::UNDOCUMENTED,
-                format!("exception code {code} is not a standard Modbus exception"),
-            );
+            notes.warn_of(M::modbus_unknown_exception!(code = code));
             Cow::Owned(format!("unknown exception code {code}"))
         }
     };
@@ -356,10 +338,7 @@ fn read_request(
         fields.push((key("start"), int(start)));
         fields.push((key("count"), int(count)));
         if !(1..=2000).contains(&count) {
-            notes.warn(
-                F::OUT_OF_RANGE,
-                format!("count {count} outside the Modbus limit of 1-2000 {what}"),
-            );
+            notes.warn_of(M::modbus_count!(count = count, limit = 2000, what = what));
         }
         let _ = write!(summary, "read {count} {what} from {start}");
         return Some(key(function_name(fc)));
@@ -369,10 +348,11 @@ fn read_request(
     fields.push((key("registers"), p.names.clone()));
     p.note(notes);
     if !(1..=125).contains(&count) {
-        notes.warn(
-            F::OUT_OF_RANGE,
-            format!("count {count} outside the Modbus limit of 1-125 registers"),
-        );
+        notes.warn_of(M::modbus_count!(
+            count = count,
+            limit = 125,
+            what = "registers"
+        ));
     }
     summary.push_str(&p.read_summary);
     p.name.clone()
@@ -436,15 +416,9 @@ fn read_response(
             let values_raw = words(raw, 3, data_end);
             let n = values_raw.len();
             if let Some(r) = req {
-                notes.warn(
-                    F::LENGTH_MISMATCH,
-                    format!(
-                        "read response with {n} registers for a request of {}: registers unknown",
-                        r.b
-                    ),
-                );
+                notes.warn_of(M::modbus_read_length!(count = n, asked = r.b));
             } else {
-                notes.warn(F::ORPHAN_RESPONSE, NO_REQUEST.to_string());
+                notes.warn_of(M::MODBUS_NO_REQUEST);
             }
             let noun = if n == 1 { "value" } else { "values" };
             let _ = write!(summary, "-> {n} {noun} (registers unknown): ");
@@ -465,7 +439,7 @@ fn read_response(
     fields.extend(p.extra.iter().cloned());
     p.note(notes);
     if !req.crc_ok {
-        notes.warn(F::UNTRUSTED_REQUEST, UNTRUSTED.to_string());
+        notes.warn_of(M::MODBUS_UNTRUSTED);
     }
     summary.push_str("-> ");
     let mut range_warnings = Vec::new();
@@ -496,10 +470,7 @@ fn write_single(
             0xFF00 => Cow::Borrowed("on"),
             0x0000 => Cow::Borrowed("off"),
             _ => {
-                notes.warn(
-                    F::OUT_OF_RANGE,
-                    format!("coil value 0x{w:04X} is neither 0xFF00 (on) nor 0x0000 (off)"),
-                );
+                notes.warn_of(M::modbus_coil_value!(value = w));
                 Cow::Owned(format!("0x{w:04X}"))
             }
         };
@@ -551,20 +522,16 @@ fn echo(
 ) {
     match req {
         None => {
-            notes.warn(
-                F::ORPHAN_RESPONSE,
-                "write response without a known request".to_string(),
-            );
+            notes.warn_of(M::MODBUS_WRITE_NO_REQUEST);
             let _ = write!(summary, "-> echo {text}");
         }
         Some(r) if r.a != addr || r.b != w => {
-            notes.warn(
-                F::RESPONSE_MISMATCH,
-                format!(
-                    "the echo differs from the request (address {} value {}, echo address {addr} value {w})",
-                    r.a, r.b
-                ),
-            );
+            notes.warn_of(M::modbus_echo_differs!(
+                address = r.a,
+                value = r.b,
+                echo_address = addr,
+                echo_value = w
+            ));
             let _ = write!(summary, "-> echo differs: {text}");
         }
         Some(_) => summary.push_str("-> ok (echo)"),
@@ -596,10 +563,11 @@ fn write_multiple(
     fields.extend(p.extra.iter().cloned());
     p.note(notes);
     if !(1..=123).contains(&count) {
-        notes.warn(
-            F::OUT_OF_RANGE,
-            format!("count {count} outside the Modbus limit of 1-123 registers"),
-        );
+        notes.warn_of(M::modbus_count!(
+            count = count,
+            limit = 123,
+            what = "registers"
+        ));
     }
     let noun = if count == 1 { "register" } else { "registers" };
     let _ = write!(summary, "write {count} {noun} from {}: ", p.start);
@@ -632,18 +600,13 @@ fn write_multiple_response(
     notes: &mut Notes,
 ) -> Option<Str> {
     match req {
-        None => notes.warn(
-            F::ORPHAN_RESPONSE,
-            "write response without a known request".to_string(),
-        ),
-        Some(r) if r.a != start || r.b != count => notes.warn(
-            F::RESPONSE_MISMATCH,
-            format!(
-                "the response (start {start}, count {count}) does not match the request \
-                 (start {}, count {})",
-                r.a, r.b
-            ),
-        ),
+        None => notes.warn_of(M::MODBUS_WRITE_NO_REQUEST),
+        Some(r) if r.a != start || r.b != count => notes.warn_of(M::modbus_write_differs!(
+            start = start,
+            count = count,
+            asked_start = r.a,
+            asked_count = r.b
+        )),
         Some(_) => {}
     }
     if fc == WRITE_COILS {

@@ -11,13 +11,11 @@ use std::borrow::Cow;
 use std::rc::Rc;
 use std::sync::OnceLock;
 
-use crate::decoders::flags as F;
 use crate::decoders::model::{Fields, Notes, Str, Value};
 use crate::decoders::registers::{
     by_modbus, by_number, is_save_register, RegRef, Register, FIRST, LAST,
 };
-
-pub const SHORT_NOTE: &str = "the host leaves out the 1000 offset, as some clients do";
+use crate::generated::messages as M;
 
 use crate::hash::FastMap;
 
@@ -103,16 +101,16 @@ pub fn spans(numbers: &[i64]) -> String {
 fn map_notes(wire_start: i64, start: i64, count: i64, short: bool, regs: &[RegRef]) -> Notes {
     let mut notes = Notes::default();
     if short {
-        let text = if count <= 1 {
-            format!("short register number: {wire_start} means {start} ({SHORT_NOTE})")
+        if count <= 1 {
+            notes.warn_of(M::modbus_short_number!(wire = wire_start, number = start));
         } else {
-            format!(
-                "short register numbers: {wire_start}-{} mean {start}-{} ({SHORT_NOTE})",
-                wire_start + count - 1,
-                start + count - 1
-            )
-        };
-        notes.warn(F::SHORT_REGISTER_NUMBERS, text);
+            notes.warn_of(M::modbus_short_numbers!(
+                wire_first = wire_start,
+                wire_last = wire_start + count - 1,
+                first = start,
+                last = start + count - 1
+            ));
+        }
     }
     let undoc: Vec<i64> = regs
         .iter()
@@ -125,13 +123,10 @@ fn map_notes(wire_start: i64, start: i64, count: i64, short: bool, regs: &[RegRe
         } else {
             "registers"
         };
-        notes.warn(
-            F::UNDOCUMENTED,
-            format!(
-                "undocumented {what} {} (not in the manual's map)",
-                spans(&undoc)
-            ),
-        );
+        notes.warn_of(M::modbus_undocumented_registers!(
+            what = what,
+            numbers = spans(&undoc)
+        ));
     }
     // the numbers outside the map: those of the listed registers, then the unlisted ones up to
     // start + count; together, the numbers of [start, start + count) below FIRST or above LAST
@@ -141,11 +136,7 @@ fn map_notes(wire_start: i64, start: i64, count: i64, short: bool, regs: &[RegRe
     let runs: Vec<(i64, i64)> = runs.into_iter().filter(|(a, b)| a < b).collect();
     let total: i64 = runs.iter().map(|(a, b)| b - a).sum();
     if total == 1 {
-        let n = runs[0].0;
-        notes.warn(
-            F::UNDOCUMENTED,
-            format!("register {n} is outside the EG2 register map"),
-        );
+        notes.warn_of(M::modbus_outside_map!(number = runs[0].0));
     } else if total > 1 {
         let parts: Vec<String> = runs
             .iter()
@@ -157,13 +148,7 @@ fn map_notes(wire_start: i64, start: i64, count: i64, short: bool, regs: &[RegRe
                 }
             })
             .collect();
-        notes.warn(
-            F::UNDOCUMENTED,
-            format!(
-                "registers {} are outside the EG2 register map",
-                parts.join(", ")
-            ),
-        );
+        notes.warn_of(M::modbus_outside_map_spans!(numbers = parts.join(", ")));
     }
     notes
 }
@@ -241,10 +226,8 @@ impl Plan {
             } else {
                 "registers"
             };
-            Some(format!(
-                "write to read-only {what} {}",
-                read_only.join(", ")
-            ))
+            // modbus_read_only_write!'s text, made once per plan
+            Some(M::modbus_read_only_write!(what = what, registers = read_only.join(", ")).1)
         };
         let names = Value::List(regs.iter().map(|r| Value::Str(r.name.clone())).collect());
         let noun = if count == 1 { "register" } else { "registers" };
@@ -421,9 +404,10 @@ mod tests {
         assert_eq!(p.summary_keys, "target_opening..force");
         assert_eq!(
             p.warnings,
-            vec![format!(
-                "short register numbers: 10-12 mean 1010-1012 ({SHORT_NOTE})"
-            )]
+            vec![
+                "short register numbers: 10-12 mean 1010-1012 (the host leaves out the 1000 \
+                  offset, as some clients do)"
+            ]
         );
         let p = Plan::new(1007, 5);
         assert_eq!(

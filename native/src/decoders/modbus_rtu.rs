@@ -16,6 +16,7 @@ use crate::decoders::framing::{ByteStreamDecoder, Framing, Stream};
 use crate::decoders::model::{
     PairKey, Record, SharedFields, Str, Text, FRAME, MODBUS_RTU, REQUEST, RESPONSE,
 };
+use crate::generated::messages as M;
 use crate::hash::FrameMemo;
 use modbus_framing::{ModbusFramer, Pending, CRC_OK, CRC_SWAPPED_ORDER};
 use modbus_pdu::decode;
@@ -91,7 +92,7 @@ fn memo_key(
     true
 }
 
-/// How the numbering warning starts (modbus_registers' short-number note).
+/// How the numbering warnings start (`MODBUS_SHORT_NUMBER` and `_NUMBERS`).
 const SHORT: &str = "short register number";
 
 /// The Modbus RTU protocol hooks of the byte-stream base, with the bus state they keep.
@@ -176,7 +177,7 @@ impl ModbusRtu {
             self.short_seen[slave as usize] = true;
             for w in warnings.iter_mut() {
                 if w.starts_with(SHORT) {
-                    w.insert_str(0, "this host uses ");
+                    *w = M::modbus_host_short_numbers!(warning = w).1;
                 }
             }
         } else {

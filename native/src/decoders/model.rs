@@ -301,6 +301,16 @@ impl Record {
         self.flag(flag);
     }
 
+    /// An error in a catalogue's words (`generated::messages`): (its code, its text).
+    pub fn error_of(&mut self, (flag, text): (&'static str, impl Into<String>)) {
+        self.error(flag, text.into());
+    }
+
+    /// A warning in a catalogue's words (`generated::messages`): (its code, its text).
+    pub fn warning_of(&mut self, (flag, text): (&'static str, impl Into<String>)) {
+        self.warning(flag, text.into());
+    }
+
     pub fn flag(&mut self, flag: &'static str) {
         if !self.flags.contains(&flag) {
             self.flags.push(flag);

@@ -11,16 +11,14 @@
 //! Here every record that enters the hold gets a ticket (consecutive numbers), so a pending
 //! request is found in the hold by arithmetic, and "waiting" is a flag beside the record.
 
-use crate::decoders::flags::{CUT_OFF, ORPHAN_RESPONSE, RETRANSMISSION, UNANSWERED};
 use crate::decoders::model::{PairKey, Record, EG2_SERIAL, FRAME, MODBUS_RTU, REQUEST, RESPONSE};
-use crate::pyfloat::{py_fixed, py_round};
+use crate::generated::messages as M;
+use crate::pyfloat::py_round;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-pub const RETRANSMITTED: &str =
-    "retransmission: the same request again before the first was answered";
-/// a request waiting when the capture was stopped (`cut_off`)
-pub const STOPPED_WAITING: &str = "no response before the capture was stopped";
+/// Why a request will not be answered: (its flag code, its text), a catalogue message.
+type Why<'a> = (&'static str, &'a str);
 
 /// Protocols on which a host has one question open at a time (RS232 question/answer, RS485
 /// half duplex): a new request on the bus means the previous one will not be answered.
@@ -301,7 +299,7 @@ impl Pairer {
         // the Python closes them in insertion order; each flag lands on its own record, so
         // the order does not show
         for key in keys.drain(..) {
-            self.close(key, "no response before the end of the capture");
+            self.close(key, M::PAIRING_END);
         }
         self.scratch = keys;
         out.extend(self.held.drain(..).map(|h| h.rec));
@@ -319,7 +317,7 @@ impl Pairer {
                 .filter(|k| self.streams.bus(k.0) == bus),
         );
         for key in keys.drain(..) {
-            self.close(key, "no response before the source was lost");
+            self.close(key, M::PAIRING_SOURCE_LOST);
         }
         self.scratch = keys;
         self.release(out);
@@ -338,7 +336,7 @@ impl Pairer {
                 .filter(|k| bus.is_none_or(|b| self.streams.bus(k.0) == b)),
         );
         for key in keys.drain(..) {
-            self.close_as(key, STOPPED_WAITING, CUT_OFF);
+            self.close(key, M::PAIRING_STOPPED);
         }
         self.scratch = keys;
         self.release(out);
@@ -382,7 +380,7 @@ impl Pairer {
             _ => false,
         };
         if retransmitted {
-            rec.warning(RETRANSMISSION, RETRANSMITTED.to_string());
+            rec.warning_of(M::PAIRING_RETRANSMISSION);
             if let Some(c) = self.pending.get_mut(&key) {
                 c.more.push(ticket);
             }
@@ -392,11 +390,11 @@ impl Pairer {
                 keys.clear();
                 keys.extend(self.pending.keys().copied().filter(|k| k.0 == sid));
                 for other in keys.drain(..) {
-                    self.close(other, "no response before the next request");
+                    self.close(other, M::PAIRING_NEXT_REQUEST);
                 }
                 self.scratch = keys;
             } else if same_first.is_some() {
-                self.close(key, "no response before the next request with the same ID");
+                self.close(key, M::PAIRING_NEXT_SAME_ID);
             }
             if !rec.expects_response {
                 return false;
@@ -419,7 +417,7 @@ impl Pairer {
     fn response(&mut self, rec: &mut Record, pk: PairKey) {
         let key = (self.streams.id(&rec.bus, rec.protocol), pk);
         let Some(copies) = self.pending.get_mut(&key) else {
-            rec.warning(ORPHAN_RESPONSE, "response without a request".to_string());
+            rec.warning_of(M::PAIRING_NO_REQUEST);
             return;
         };
         let ticket = copies.first; // answers come in the order the copies were sent
@@ -463,8 +461,8 @@ impl Pairer {
                 let Some(t) = t else { continue };
                 let limit = self.expiry_limit(is_save);
                 if now - t > limit {
-                    let why = format!("no response within {} ms", py_fixed(limit * 1000.0, 0));
-                    self.drop_request(key, ticket, &why);
+                    let (code, text) = M::pairing_timeout!(ms = limit * 1000.0);
+                    self.drop_request(key, ticket, (code, &text));
                 } else {
                     nxt = nxt.min(t + limit);
                 }
@@ -475,33 +473,23 @@ impl Pairer {
     }
 
     /// No more answers will come for the requests waiting on key.
-    fn close(&mut self, key: Key, why: &str) {
-        self.close_as(key, why, UNANSWERED);
-    }
-
-    /// `close`, flagging the requests `code` (why they will not be answered).
-    fn close_as(&mut self, key: Key, why: &str, code: &'static str) {
+    fn close(&mut self, key: Key, why: Why) {
         let Some(c) = self.pending.get(&key) else {
             return;
         };
         let tickets: Vec<u64> = c.iter().collect();
         for ticket in tickets {
-            self.drop_request_as(key, ticket, why, code);
+            self.drop_request(key, ticket, why);
         }
     }
 
-    /// A waiting request will not be answered: say so on it (unless an earlier copy of it was
-    /// answered) and stop waiting.
-    fn drop_request(&mut self, key: Key, ticket: u64, why: &str) {
-        self.drop_request_as(key, ticket, why, UNANSWERED);
-    }
-
-    /// `drop_request`, flagging the request `code`.
-    fn drop_request_as(&mut self, key: Key, ticket: u64, why: &str, code: &'static str) {
+    /// A waiting request will not be answered (`why`, with its flag): say so on it (unless an
+    /// earlier copy of it was answered) and stop waiting.
+    fn drop_request(&mut self, key: Key, ticket: u64, why: Why) {
         let answered = self.answered.contains(&key);
         let held = self.held_mut(ticket);
         if !answered {
-            held.rec.warning(code, why.to_string());
+            held.rec.warning_of(why);
         }
         held.waiting = false;
         let left = self.pending.get_mut(&key).is_some_and(|c| c.remove(ticket));
@@ -541,7 +529,7 @@ impl Pairer {
             )
         };
         let key = (self.streams.id(&bus, protocol), pk);
-        self.drop_request(key, head, "no response within the pairing window");
+        self.drop_request(key, head, M::PAIRING_WINDOW);
     }
 }
 
@@ -689,8 +677,8 @@ mod tests {
         );
         assert_eq!(out.iter().map(|r| r.seq).collect::<Vec<_>>(), vec![0, 1, 2]);
         assert_eq!(out[0].pair, Some(2));
-        assert_eq!(out[1].warnings, vec![RETRANSMITTED]);
-        assert_eq!(out[1].flags, vec![RETRANSMISSION]);
+        assert_eq!(out[1].warnings, vec![M::PAIRING_RETRANSMISSION.1]);
+        assert_eq!(out[1].flags, vec![M::PAIRING_RETRANSMISSION.0]);
         assert_eq!(out[1].pair, None); // answered exchange: not flagged unanswered at the end
     }
 
