@@ -61,17 +61,18 @@ SHORTEST_STUB: Final = 6  # a word cut shorter than this ("CMD_…") says nothin
 
 def cut_at(text: str, width: int) -> int:
     """Where to cut ``text`` so that it and an ellipsis fit ``width`` cells: at ``width - 1``,
-    or before the word there when only a stub of it would show and an earlier word ends in
-    the second half of the room (a list of names then loses whole names, not their heads)."""
+    or before the item there when only a stub of it would show (``CMD_…``) and the items are
+    a list (``a, b, c``) whose earlier item ends in the second half of the room: the list
+    then loses whole items and says so (``a, b, …``). A range ``A..B`` keeps its stub, which
+    shows it is one."""
     cut = max(0, width - 1)
     start = cut
     while start > 0 and _in_word(text[start - 1]):
         start -= 1
     stub = cut - start
-    if 0 < stub < SHORTEST_STUB and _in_word(text[cut]):
-        end = len(text[:start].rstrip(" ,.;:"))
-        if end >= cut // 2:
-            return end
+    listed = start > 0 and text[start - 1] in " ,"
+    if listed and 0 < stub < SHORTEST_STUB and _in_word(text[cut]) and start >= cut // 2:
+        return start
     return cut
 
 
@@ -83,7 +84,7 @@ def fit(text: str, width: int) -> str:
     """``text`` in exactly ``width`` cells: padded, or cut with an ellipsis."""
     if len(text) <= width:
         return text.ljust(width)
-    return (text[: cut_at(text, width)] + ELLIPSIS).ljust(width) if width > 0 else ""
+    return text[: max(0, width - 1)] + ELLIPSIS if width > 0 else ""
 
 
 class TimeMode(Enum):

@@ -19,7 +19,7 @@ from decoders.flags import DESCRIPTIONS
 from decoders.model import Record
 
 from ..messages import ByteSelected, FieldSelected
-from ..rows import ELLIPSIS, cut_at
+from ..rows import cut_at
 from ..spans import FRAME_PART, Span, span_at, span_of, spans
 
 NodeData = Span | None
@@ -126,10 +126,8 @@ class DetailTree(Tree[NodeData]):
             room -= self.styles.scrollbar_size_vertical
         if room > 0 and label.cell_len > room:
             if label.cell_len == len(label.plain):  # one cell a character: cut between words
-                label.truncate(cut_at(label.plain, room))
-                label.append(ELLIPSIS)
-            else:
-                label.truncate(room, overflow="ellipsis")
+                room = cut_at(label.plain, room) + 1
+            label.truncate(room, overflow="ellipsis")
         return label
 
     def select_offset(self, offset: int) -> None:
