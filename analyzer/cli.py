@@ -45,6 +45,12 @@ def command_named(argv: Sequence[str]) -> str | None:
     return word if word in SUBCOMMANDS else None
 
 
+def runs_until_stopped(args: argparse.Namespace) -> bool:
+    """Whether the command runs until the user stops it: a live source, the demo or the
+    simulator (its parser sets ``until_stopped``), and not a capture file (``file``)."""
+    return bool(getattr(args, "until_stopped", False)) and not getattr(args, "file", None)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     try:  # the subcommands' imports take a moment: a Ctrl-C then ends it without a traceback
         parser = build_parser(command_named(sys.argv[1:] if argv is None else argv))
@@ -63,7 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout.flush()  # a pipe closed early shows here, not at interpreter exit
         return code
     except KeyboardInterrupt:
-        code = stop_status(args)
+        code = stop_status(runs_until_stopped(args))
         print(f"eg2scope: {'interrupted' if code else 'stopped'}", file=sys.stderr)
         return code
     except BrokenPipeError:

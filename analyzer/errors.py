@@ -14,7 +14,6 @@ of its input exits 130 (``stop_status``).
 
 from __future__ import annotations
 
-import argparse
 from typing import Final
 
 EXIT_OK: Final = 0
@@ -32,13 +31,7 @@ class SourceError(OSError):
     """A live source never opened: the message names the device and says why (exit 1)."""
 
 
-def runs_until_stopped(args: argparse.Namespace) -> bool:
-    """Whether the command runs until the user stops it: a live source, the demo or the
-    simulator (its parser sets ``until_stopped``), and not a capture file (``file``)."""
-    return bool(getattr(args, "until_stopped", False)) and not getattr(args, "file", None)
-
-
-def stop_status(args: argparse.Namespace) -> int:
+def stop_status(until_stopped: bool) -> int:
     """The exit status of a command ended by Ctrl-C, SIGTERM or SIGHUP: 0 for a command that
     runs until stopped (stopping it is how it ends), 130 for a file job cut short."""
-    return EXIT_OK if runs_until_stopped(args) else EXIT_INTERRUPTED
+    return EXIT_OK if until_stopped else EXIT_INTERRUPTED

@@ -1,15 +1,16 @@
-"""Running a live session from the command line (live, record, bridge, demo, live plot): the
+"""Running a live session for a live command (live, record, bridge, demo, a live plot): the
 source opened first (a device that does not open fails at once, before any output is made), the
 outputs, a status line, source events as they happen, and a clean ending: a user's stop (Ctrl-C,
-SIGTERM, SIGHUP) or the end of ``--duration`` is how a live capture ends, exit 0."""
+SIGTERM, SIGHUP) or the end of ``--duration`` is how a live capture ends, exit 0. The options
+come typed (``LiveOptions``), never as the command line's namespace."""
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from collections.abc import Callable, Sequence
-from typing import IO, Any
+from dataclasses import dataclass
+from typing import IO, TYPE_CHECKING, Any
 
 from decoders.model import Record
 
@@ -25,8 +26,27 @@ from .sources.live import Tap
 from .sources.naming import BUS_BY_PROTOCOL
 from .sources.source import LiveSource
 
+if TYPE_CHECKING:
+    from .sim.rig import DemoOptions
+
 # a live command's own listeners: a list, or what makes them once the taps are open
 Extra = list[Listener] | Callable[[], list[Listener]] | None
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """A live session's options, typed. ``protocol``: the byte protocol's name or alias ("auto"
+    or None: detected per stream); ``output``: the MCAP file to record (None: no recording);
+    ``force``: replace that file if it is there; ``duration``: seconds until the session stops
+    (None: until the user stops it); ``queue_size``: items buffered between capture and
+    decoding; ``rerun``: a Rerun target the session also goes to (None: no plot)."""
+
+    protocol: str | None
+    output: str | None
+    force: bool
+    duration: float | None
+    queue_size: int
+    rerun: str | None = None
 
 
 class StatusLine(Listener):
@@ -110,12 +130,12 @@ def check_recording_name(path: str) -> None:
         raise UsageError(f"recordings are MCAP files: name the output *.mcap, not {path}")
 
 
-def check_recording_output(args: argparse.Namespace) -> None:
+def check_recording_output(options: LiveOptions) -> None:
     """``-o``, before anything starts: an MCAP name, a folder that is there, and no file that
     a recording would replace unless ``--force``."""
-    if args.output:
-        check_recording_name(args.output)
-        check_new_file(args.output, getattr(args, "force", False))
+    if options.output:
+        check_recording_name(options.output)
+        check_new_file(options.output, options.force)
 
 
 def recorder(path: str, taps: list[Tap]) -> Listener:
@@ -135,7 +155,7 @@ def open_source(
 
 
 def run_session(
-    args: argparse.Namespace,
+    options: LiveOptions,
     taps: list[Tap],
     show: str | None = "text",
     per_bus: dict[str, str] | None = None,
@@ -149,32 +169,45 @@ def run_session(
     made (``extra``: more listeners, or what makes them once the taps are open, so an output
     file of theirs is never made for a source that fails). ``on_done`` is handed the finished
     session."""
-    from decoders.registry import resolve_protocol
-
-    try:
-        protocol = None if args.protocol in (None, "auto") else resolve_protocol(args.protocol)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    check_recording_output(args)
-    options = SessionOptions(
+    protocol = session_protocol(options.protocol)
+    check_recording_output(options)
+    session_options = SessionOptions(
         protocol=protocol,
         per_bus=per_bus or {},
         byte_time_s=byte_times(taps),
-        duration=args.duration,
+        duration=options.duration,
     )
-    source = open_source(taps, args.queue_size, on_start)
+    source = open_source(taps, options.queue_size, on_start)
     try:  # until the session runs, the source is closed here if anything fails
-        session = Session(source, _outputs(args, taps, show, extra), options)
+        session = Session(source, _outputs(options, taps, show, extra), session_options)
     except BaseException:
         source.stop()
         raise
     if show is None:
-        what = f"recording {args.output}" if args.output else "watching"
+        what = f"recording {options.output}" if options.output else "watching"
         session.listeners.append(StatusLine(session, what, taps, sys.stderr))
-    counts = session.run()
+    session.run()
     if on_done is not None:
         on_done(session)
-    where = f" into {args.output}" if args.output else ""
+    return _report(session, taps, options.output)
+
+
+def session_protocol(name: str | None) -> str | None:
+    """The byte protocol a name or alias says (None, "auto": detected per stream)."""
+    from decoders.registry import resolve_protocol
+
+    if name is None or name == "auto":
+        return None
+    try:
+        return resolve_protocol(name)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _report(session: Session, taps: list[Tap], output: str | None) -> int:
+    """What the session did and what failed, on stderr, and the exit status."""
+    counts = session.counts
+    where = f" into {output}" if output else ""
     stopped = "stopped: " if counts.interrupted else ""
     print(f"eg2scope: {stopped}{counts.line()}{where}", file=sys.stderr)
     for listener, failure in session.detached:
@@ -187,19 +220,49 @@ def run_session(
 
 
 def _outputs(
-    args: argparse.Namespace, taps: list[Tap], show: str | None, extra: Extra
+    options: LiveOptions, taps: list[Tap], show: str | None, extra: Extra
 ) -> list[Listener]:
     listeners: list[Listener] = list((extra() if callable(extra) else extra) or [])
     if show == "text":  # live: time counts from the session's start
         listeners.append(make_listener("text", sys.stdout, t0=time.time()))
     elif show is not None:
         listeners.append(make_listener(show, sys.stdout.buffer))
-    if args.output:
-        listeners.append(recorder(args.output, taps))
-    target = getattr(args, "rerun", None)
-    if target is not None:  # Rerun is imported only when it is asked for
+    if options.output:
+        listeners.append(recorder(options.output, taps))
+    if options.rerun is not None:  # Rerun is imported only when it is asked for
         from .plot.listener import rerun_listener
 
-        rerun = rerun_listener(target, source=args.output)
+        rerun = rerun_listener(options.rerun, source=options.output)
         listeners += [] if rerun is None else [rerun]
     return listeners
+
+
+def run_demo(
+    command: str,
+    demo: DemoOptions,
+    options: LiveOptions,
+    show: str | None,
+    extra: Extra = None,
+    on_done: Callable[[Session], None] | None = None,
+) -> int:
+    """The simulated grippers through one live session, for ``eg2scope COMMAND`` (``extra``:
+    more listeners; ``on_done``: handed the finished session)."""
+    from .sim.rig import DemoRig
+
+    check_recording_output(options)  # before the banner and the rig
+    with DemoRig(demo.buses, noise=demo.noise) as rig:
+        print(
+            f"eg2scope {command}: simulated grippers 1 and 2 on "
+            + ", ".join(f"{t.bus} ({type(t).__name__})" for t in rig.taps)
+            + "; Ctrl-C to stop",
+            file=sys.stderr,
+        )
+        return run_session(
+            options,
+            rig.taps,
+            show=show,
+            per_bus=rig.protocols,
+            on_start=rig.run_hosts,
+            extra=extra,
+            on_done=on_done,
+        )

@@ -1,7 +1,8 @@
 """The layout's rules, read from the import graph grimp builds of ``analyzer`` and ``decoders``
 (every import: at module level, inside functions and under ``if TYPE_CHECKING:``), as
-docs/architecture.md states them: no import circle; only the CLI imports ``analyzer.commands``;
-the decoders import nothing of the analyzer."""
+docs/architecture.md states them: no import circle; only the CLI imports ``analyzer.commands``,
+and only the CLI reads argparse (below it, options travel typed); the decoders import nothing of
+the analyzer."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ COMMANDS = "analyzer.commands"
 
 @pytest.fixture(scope="module")
 def graph() -> grimp.ImportGraph:
-    return grimp.build_graph("analyzer", "decoders", cache_dir=None)
+    # external packages too (the standard library among them), each as one module
+    return grimp.build_graph("analyzer", "decoders", include_external_packages=True, cache_dir=None)
 
 
 def _edges(graph: grimp.ImportGraph) -> list[tuple[str, str]]:
@@ -50,6 +52,13 @@ def test_no_import_circle(graph: grimp.ImportGraph) -> None:
 
 def test_only_the_cli_imports_the_commands(graph: grimp.ImportGraph) -> None:
     importers = graph.find_modules_that_directly_import(COMMANDS, as_package=True)
+    below = {m for m in importers if m != CLI and not m.startswith(COMMANDS + ".")}
+    assert below == set()
+
+
+def test_only_the_cli_reads_argparse(graph: grimp.ImportGraph) -> None:
+    importers = graph.find_modules_that_directly_import("argparse")
+    assert importers  # the CLI does: a graph without argparse would pass the rule
     below = {m for m in importers if m != CLI and not m.startswith(COMMANDS + ".")}
     assert below == set()
 

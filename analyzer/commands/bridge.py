@@ -3,21 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from typing import Any
 
 from ..live_runner import run_session
-from ..sources.naming import UNNAMED
-from ..sources.serial_tap import SerialBridge
-from .common import add_session_arguments
+from ..sources.tap_options import make_taps
+from .common import add_session_arguments, live_options
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
-from .livesource import (
-    add_line_arguments,
-    add_naming_arguments,
-    add_wait_argument,
-    line_states,
-    named_serial_tap,
-    serial_bus_name,
-)
+from .livesource import add_line_arguments, add_naming_arguments, add_wait_argument, tap_options
 
 
 def add_subparser(sub: Any) -> None:
@@ -53,15 +46,5 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    rts, dtr = line_states(args)
-    name = serial_bus_name(args)
-    tap = SerialBridge(
-        name or UNNAMED,
-        args.host_port,
-        args.device_port,
-        args.baud,
-        rts=rts,
-        dtr=dtr,
-        wait=args.wait,
-    )
-    return run_session(args, [named_serial_tap(tap, name)], show=args.format)
+    taps = replace(tap_options(args), bridge=(args.host_port, args.device_port))
+    return run_session(live_options(args), make_taps(taps), show=args.format)

@@ -1,9 +1,10 @@
-"""What the offline commands (decode, stats, and later plot/tui on captures) share: the input
-options, their checks, and running a capture through one session."""
+"""The options several commands share, and their typed forms: the input options of the offline
+commands (decode, stats, plot and tui on captures) and the options of a live session."""
 
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from decoders.registry import resolve_protocol
 
@@ -12,6 +13,9 @@ from ..plot.target import DEFAULT as DEFAULT_TARGET
 from ..session.capture import CaptureOptions
 from ..sources.pacing import parse_speed
 from .helptext import CAPTURE_FILE
+
+if TYPE_CHECKING:
+    from ..live_runner import LiveOptions
 
 
 def _whole_number(text: str, lowest: int) -> int:
@@ -133,7 +137,7 @@ def capture_options(args: argparse.Namespace) -> CaptureOptions:
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:
     """The options of a live session (its outputs and its end); a live command runs until it
-    is stopped, and a stop is a clean end (``errors.runs_until_stopped``)."""
+    is stopped, and a stop is a clean end (``cli.runs_until_stopped``)."""
     parser.set_defaults(until_stopped=True)
     parser.add_argument(
         "--output",
@@ -161,6 +165,21 @@ def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool
         metavar="N",
         help="items buffered between capture and decoding before drops are "
         "counted (default 200000)",
+    )
+
+
+def live_options(args: argparse.Namespace) -> LiveOptions:
+    """The options of a live session's arguments, typed (``--rerun``: None where the command
+    has none)."""
+    from ..live_runner import LiveOptions  # imported by live commands only: decode needs none
+
+    return LiveOptions(
+        protocol=args.protocol,
+        output=args.output,
+        force=args.force,
+        duration=args.duration,
+        queue_size=args.queue_size,
+        rerun=getattr(args, "rerun", None),
     )
 
 

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
-from collections.abc import Callable
 from typing import Any
 
-from ..live_runner import Extra, check_recording_output, run_session
-from ..session.session import Session
-from ..sim.rig import BUSES, DemoRig
-from .common import add_session_arguments, probability
+from ..live_runner import run_demo
+from ..sim.rig import BUSES, DemoOptions
+from .common import add_session_arguments, live_options, probability
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 
 
@@ -69,32 +66,10 @@ def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run_demo(
-    args: argparse.Namespace,
-    show: str | None,
-    extra: Extra = None,
-    on_done: Callable[[Session], None] | None = None,
-) -> int:
-    """The simulated grippers through one live session (``extra``: more listeners;
-    ``on_done``: handed the finished session)."""
-    check_recording_output(args)  # before the banner and the rig
-    with DemoRig(args.buses, noise=args.noise) as rig:
-        print(
-            f"eg2scope {args.command}: simulated grippers 1 and 2 on "
-            + ", ".join(f"{t.bus} ({type(t).__name__})" for t in rig.taps)
-            + "; Ctrl-C to stop",
-            file=sys.stderr,
-        )
-        return run_session(
-            args,
-            rig.taps,
-            show=show,
-            per_bus=rig.protocols,
-            on_start=rig.run_hosts,
-            extra=extra,
-            on_done=on_done,
-        )
+def demo_options(args: argparse.Namespace) -> DemoOptions:
+    """The demo options of a command's arguments, typed."""
+    return DemoOptions(buses=args.buses, noise=args.noise)
 
 
 def run(args: argparse.Namespace) -> int:
-    return run_demo(args, show=args.format)
+    return run_demo(args.command, demo_options(args), live_options(args), show=args.format)

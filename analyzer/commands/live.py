@@ -6,9 +6,10 @@ import argparse
 from typing import Any
 
 from ..live_runner import run_session
-from .common import add_rerun_argument, add_session_arguments
+from ..sources.tap_options import make_taps
+from .common import add_rerun_argument, add_session_arguments, live_options
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
-from .livesource import add_source_arguments, open_taps
+from .livesource import add_source_arguments, tap_options
 
 
 def add_subparser(sub: Any) -> None:
@@ -46,4 +47,4 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return run_session(args, open_taps(args), show=args.format)
+    return run_session(live_options(args), make_taps(tap_options(args)), show=args.format)

@@ -4,29 +4,16 @@ clock in Rerun, from a capture, a recording or a live bus (docs/rerun.md)."""
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
-from ..errors import EXIT_INTERRUPTED, UsageError
-from ..live_runner import run_session
-from ..plot.target import (
-    SERVE_WEB,
-    SPAWN,
-    RerunTarget,
-    connect_target,
-    default_target,
-    save_target,
-)
-from ..session.batches import session_engine
-from ..session.capture import CaptureOptions, finish_capture, open_reader, run_capture
+from ..plot.launch import PlotOptions, plot
+from ..plot.target import TargetChoice
+from ..session.capture import CaptureOptions
 from ..session.engine import ENGINES
-from ..session.listener import Listener
-from ..session.session import Session
-from ..sources.capture import CaptureReader
-from .common import add_session_arguments, protocol_type, speed_type
-from .demo import add_demo_arguments
+from .common import add_session_arguments, live_options, speed_type
+from .demo import add_demo_arguments, demo_options
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
-from .livesource import CAN_KEYS, add_source_arguments, open_taps
+from .livesource import add_source_arguments, tap_options
 
 
 def add_subparser(sub: Any) -> None:
@@ -111,139 +98,29 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    live = args.demo or live_source_given(args)
-    if args.file and live:
-        raise UsageError("give a capture file or a live source (or --demo), not both")
-    if not args.file and not live:
-        raise UsageError(
-            "nothing to plot: give a capture file, a live source (-i/-c, "
-            "--serial PORT) or --demo (see --help)"
-        )
-    if args.file:
-        return plot_capture(args)
-    return plot_live(args)
+    return plot(plot_options(args))
 
 
-def live_source_given(args: argparse.Namespace) -> bool:
-    can_given = any(key in args for key in CAN_KEYS) or bool(getattr(args, "bus_kwargs", None))
-    return can_given or bool(args.serial) or bool(getattr(args, "bridge", None))
+def plot_options(args: argparse.Namespace) -> PlotOptions:
+    """The plot's options, typed: a capture (``FILE``), the demo (``--demo``) or live sources."""
+    return PlotOptions(
+        target=TargetChoice(
+            save=args.save, spawn=args.spawn, connect=args.connect, serve_web=args.serve_web
+        ),
+        live=live_options(args),
+        taps=tap_options(args),
+        capture=capture_to_plot(args) if args.file else None,
+        demo=demo_options(args) if args.demo else None,
+    )
 
 
-def chosen_target(args: argparse.Namespace, source: str | None) -> RerunTarget:
-    """The target the options name, or the default for ``source`` (None: a live session)."""
-    if args.save:
-        if source is not None and args.save == source:
-            raise UsageError(f"--save {args.save} would overwrite the capture being plotted")
-        return save_target(args.save)
-    if args.spawn:
-        return RerunTarget(SPAWN)
-    if args.connect is not None:
-        return connect_target(args.connect or None)
-    if args.serve_web:
-        return RerunTarget(SERVE_WEB)
-    return default_target(source)
-
-
-def plot_capture(args: argparse.Namespace) -> int:
-    from ..plot.listener import LIVE_FLUSH_S, RerunListener
-
-    if args.output:
-        raise UsageError("-o records a live source; a capture is plotted as it is")
-    try:
-        protocol = protocol_type(args.protocol or "auto")
-    except argparse.ArgumentTypeError as exc:
-        raise UsageError(str(exc)) from None
-    opts = CaptureOptions(
+def capture_to_plot(args: argparse.Namespace) -> CaptureOptions:
+    """The capture to plot (no record filter: every record is plotted)."""
+    return CaptureOptions(
         path=args.file,
-        protocol=protocol,
+        protocol=args.protocol,
         bus=args.bus,
         speed=args.speed,
         progress=not args.no_progress,
         engine=args.engine,
     )
-    target = chosen_target(args, args.file)
-    reader = open_reader(opts)  # a capture that cannot be read fails before a viewer opens
-    try:
-        try:  # an engine that cannot decode this capture: said before a viewer opens
-            session_engine(args.engine, reader.kind, reader.single_stream)
-        except ValueError as exc:
-            raise UsageError(f"--engine {args.engine}: {exc}") from None
-        # a paced replay is watched as it goes: update the viewer as often as live
-        flush = LIVE_FLUSH_S if args.speed is not None else None
-        listener = RerunListener(target, flush_interval=flush)
-    except BaseException:
-        reader.close()
-        raise
-    unread = UnreadCapture(reader, listener.output)  # closed first: it may discard the plot
-    session, reader = run_capture(opts, [unread, listener], reader)
-    code = finish_capture(args.file, session, reader)
-    for _, failure in session.detached:
-        print(f"eg2scope: error: the Rerun output failed: {failure}", file=sys.stderr)
-    if code != EXIT_INTERRUPTED:
-        listener.output.hold()
-    listener.output.stop_server()
-    return code
-
-
-class UnreadCapture(Listener):
-    """A capture from which nothing at all could be read gets no plot (no .rrd file); a
-    damaged one that yielded anything keeps its plot."""
-
-    wants_raw = True
-
-    def __init__(self, reader: CaptureReader, output: Any) -> None:
-        self.reader = reader
-        self.output = output
-        self.items = 0
-
-    def on_raw(self, items: list[Any]) -> None:
-        self.items += len(items)
-
-    def on_records(self, records: Any) -> None:
-        pass
-
-    def close(self) -> None:
-        if self.reader.errors and not self.items:
-            self.output.discard()
-
-
-def plot_live(args: argparse.Namespace) -> int:
-
-    if args.demo:
-        return _plot_demo(args)
-    taps = open_taps(args)  # usage errors before a viewer opens
-    target = chosen_target(args, args.output)
-    made: list[Any] = []  # made once the taps are open: a source that fails makes no file
-    ended: list[Session] = []
-    code = run_session(
-        args, taps, show=None, extra=lambda: made_listener(made, target), on_done=ended.append
-    )
-    return _finish_live(made[0], code, ended)
-
-
-def made_listener(made: list[Any], target: RerunTarget) -> list[Any]:
-    from ..plot.listener import RerunListener
-
-    made.append(RerunListener(target, live=True))
-    return made
-
-
-def _plot_demo(args: argparse.Namespace) -> int:
-    from .demo import run_demo
-
-    target = chosen_target(args, args.output)
-    made: list[Any] = []  # made once the rig runs: a refused -o makes no file
-    ended: list[Session] = []
-    code = run_demo(
-        args, show=None, extra=lambda: made_listener(made, target), on_done=ended.append
-    )
-    return _finish_live(made[0], code, ended)
-
-
-def _finish_live(listener: Any, code: int, ended: list[Session]) -> int:
-    """A served web viewer stays up after a session that ran its course (--duration), not
-    after the user stopped it."""
-    if not any(session.counts.interrupted for session in ended):
-        listener.output.hold()
-    listener.output.stop_server()
-    return code

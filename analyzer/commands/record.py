@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..live_runner import run_session
-from .common import add_rerun_argument, add_session_arguments
-from .demo import add_demo_arguments, run_demo
+from ..live_runner import run_demo, run_session
+from ..sources.tap_options import make_taps
+from .common import add_rerun_argument, add_session_arguments, live_options
+from .demo import add_demo_arguments, demo_options
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
-from .livesource import add_source_arguments, open_taps
+from .livesource import add_source_arguments, tap_options
 
 
 def add_subparser(sub: Any) -> None:
@@ -46,7 +47,7 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.demo:
-        return run_demo(args, show="text" if args.show else None)
     show = "text" if args.show else None
-    return run_session(args, open_taps(args), show=show)
+    if args.demo:
+        return run_demo(args.command, demo_options(args), live_options(args), show=show)
+    return run_session(live_options(args), make_taps(tap_options(args)), show=show)

@@ -122,6 +122,33 @@ def parse_target(text: str | None, source: str | None = None) -> RerunTarget:
     )
 
 
+@dataclass(frozen=True)
+class TargetChoice:
+    """Where ``eg2scope plot``'s options send the plot: ``save`` an .rrd file, ``spawn`` a
+    viewer, ``connect`` to a running one ("": the default URL), or ``serve_web``; none of
+    them: the default for the source (``default_target``)."""
+
+    save: str | None = None
+    spawn: bool = False
+    connect: str | None = None
+    serve_web: bool = False
+
+
+def chosen_target(choice: TargetChoice, source: str | None) -> RerunTarget:
+    """The target the choice names, or the default for ``source`` (None: a live session)."""
+    if choice.save:
+        if source is not None and choice.save == source:
+            raise UsageError(f"--save {choice.save} would overwrite the capture being plotted")
+        return save_target(choice.save)
+    if choice.spawn:
+        return RerunTarget(SPAWN)
+    if choice.connect is not None:
+        return connect_target(choice.connect or None)
+    if choice.serve_web:
+        return RerunTarget(SERVE_WEB)
+    return default_target(source)
+
+
 # -- opening an output -------------------------------------------------------------------------
 
 

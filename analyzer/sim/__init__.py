@@ -3,5 +3,6 @@
 ``gripper.GripperModel`` is the device (pure, time passed in); ``ptybus.PtyBus`` a virtual
 multi-drop serial line of real ptys; ``endpoints`` serves models over the regular serial
 protocol, Modbus RTU and CAN; ``host`` is a scripted host program (a pick-and-place cycle);
-``rig`` joins them into the demo rig (grippers and a passive tap on each of the three buses).
+``rig`` joins them into the demo rig (grippers and a passive tap on each of the three buses);
+``serve`` is ``eg2scope sim``'s run.
 """

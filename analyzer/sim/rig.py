@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from decoders.model import EG2_SERIAL, MODBUS_RTU
@@ -29,6 +30,15 @@ from .ptybus import PtyBus
 
 BUSES = ("serial", "modbus", "can")
 BUS_NAMES = {"serial": "rs232", "modbus": "rs485", "can": "can0"}
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """The demo a command asks for: which of ``BUSES`` to simulate, and the probability of a
+    corrupted, garbled or dropped response."""
+
+    buses: tuple[str, ...]
+    noise: float
 
 
 class DemoRig(Running):

@@ -6,6 +6,7 @@ fills the store and posts batches), ``aggregates`` (what the side panels fold fr
 ``rows`` (one record as one line), ``spans`` (which bytes carry which field), ``replay`` (paced
 capture replay with pause and speed), ``export``, ``messages``, ``notes`` (outputs' stderr
 while the TUI holds the terminal), ``keys`` (every key, one table), ``layout`` (the screen at
-each terminal size), ``widgets/`` and ``screens``, and ``app`` that joins them. Textual is
-imported only here.
+each terminal size), ``widgets/`` and ``screens``, ``app`` that joins them, and ``launch``
+(``eg2scope tui``'s run: the session plan, the app, what is said after). Textual is imported
+only here.
 """

@@ -133,17 +133,17 @@ def thread_cpu() -> dict[str, float]:
 
 
 async def bench_live(seconds: float, rate: int) -> None:
-    from conftest import live_args
+    from conftest import live_opts
 
-    from analyzer.commands.tui import live_plan
     from analyzer.sources.can_tap import CanTap
     from analyzer.sources.live import wait_open
     from analyzer.tui.app import Eg2ScopeApp
+    from analyzer.tui.launch import live_plan
 
     # a group and port of this run's own: other processes on the machine stay out of it
     group, port = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173", 43200 + os.getpid() % 1000
     tap = CanTap("can0", "udp_multicast", group, port=port)
-    app = Eg2ScopeApp(live_plan(live_args(), [tap], {}, None))
+    app = Eg2ScopeApp(live_plan(live_opts(), [tap], {}, None))
     async with app.run_test(size=(200, 50)) as pilot:
         while app.session is None or not wait_open([tap], 0.0):
             await asyncio.sleep(0.01)

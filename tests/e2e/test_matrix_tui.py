@@ -17,10 +17,11 @@ from e2e_inputs import CAN_IDS, IDS
 from textual.worker import Worker, WorkerState
 
 from analyzer.cli import build_parser
-from analyzer.commands.tui import capture_plan
+from analyzer.commands.tui import tui_options
 from analyzer.session.batches import RecordSequence
 from analyzer.session.session import Session
 from analyzer.tui.app import Eg2ScopeApp
+from analyzer.tui.launch import capture_plan
 
 SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
 SIZE = (200, 50)
@@ -46,7 +47,7 @@ async def replayed(path: Path) -> tuple[Eg2ScopeApp, list[Session], list[BaseExc
             failures.append(message.worker.error or RuntimeError("worker failed"))
 
     with ExitStack() as stack:
-        plan = capture_plan(build_parser().parse_args(["tui", str(path)]), stack)
+        plan = capture_plan(tui_options(build_parser().parse_args(["tui", str(path)])), stack)
         app = Eg2ScopeApp(plan)
         try:
             async with app.run_test(size=SIZE, message_hook=watch) as pilot:

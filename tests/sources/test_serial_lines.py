@@ -12,9 +12,10 @@ import pytest
 import serial
 from taps.tap_helpers import Collector, Pty
 
-from analyzer.commands.livesource import add_source_arguments, open_taps
+from analyzer.commands.livesource import add_source_arguments, tap_options
 from analyzer.sources.live import Tap, TapQueue
 from analyzer.sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
+from analyzer.sources.tap_options import make_taps
 
 Calls = list[tuple[Any, ...]]
 
@@ -149,10 +150,10 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 def test_line_options(ptys: Callable[[], Pty], argv: list[str], rts: bool, dtr: bool) -> None:
     p, q = ptys(), ptys()
     for ports in (["--serial", p.name], ["--serial", p.name, "--serial", q.name]):
-        (tap,) = open_taps(_parse([*ports, *argv]))
+        (tap,) = make_taps(tap_options(_parse([*ports, *argv])))
         assert isinstance(tap, SerialTap | SerialPairTap)
         assert (tap.rts, tap.dtr) == (rts, dtr)
-    (bridge,) = open_taps(_parse(["--bridge", p.name, q.name, *argv]))
+    (bridge,) = make_taps(tap_options(_parse(["--bridge", p.name, q.name, *argv])))
     assert isinstance(bridge, SerialBridge) and (bridge.rts, bridge.dtr) == (rts, dtr)
 
 

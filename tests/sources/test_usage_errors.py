@@ -16,10 +16,11 @@ from typing import Any
 import can
 import pytest
 
-from analyzer.commands.livesource import add_source_arguments, open_taps
+from analyzer.commands.livesource import add_source_arguments, tap_options
 from analyzer.errors import UsageError
 from analyzer.sources.can_tap import CanTap
 from analyzer.sources.serial_tap import SerialBridge, SerialPairTap, SerialTap
+from analyzer.sources.tap_options import make_taps
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -96,14 +97,14 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         ([], "no source given"),
     ],
 )
-def test_open_taps_refuses_at_once(
+def test_make_taps_refuses_at_once(
     monkeypatch: pytest.MonkeyPatch, argv: list[str], message: str
 ) -> None:
     monkeypatch.delenv("CAN_INTERFACE", raising=False)
     monkeypatch.delenv("CAN_CHANNEL", raising=False)
     monkeypatch.setenv("HOME", "/nonexistent")  # no ~/can.ini
     with pytest.raises(UsageError, match=message):
-        open_taps(_parse(argv))
+        make_taps(tap_options(_parse(argv)))
 
 
 def test_unknown_interface_is_refused_by_the_parser(capsys: pytest.CaptureFixture[str]) -> None:
@@ -119,13 +120,13 @@ def test_can_options_are_python_cans(monkeypatch: pytest.MonkeyPatch) -> None:
     channel = f"eg2scope-test-{uuid.uuid4().hex}"
     bus_kwargs = ["--bus-kwargs", "state=ACTIVE", "f_clock_mhz=80"]
     args = _parse(["-i", "pcan", "-c", "PCAN_USBBUS1", "-b", "500000", "--fd", *bus_kwargs])
-    (tap,) = open_taps(args)
+    (tap,) = make_taps(tap_options(args))
     assert isinstance(tap, CanTap)
     assert (tap.interface, tap.channel, tap.bitrate) == ("pcan", "PCAN_USBBUS1", 500000)
     assert tap.kwargs == {"fd": True, "state": "ACTIVE", "f_clock_mhz": 80}
     assert tap.passive == "no"  # state=ACTIVE overrides listen-only, and the tap says so
     monkeypatch.setenv("CAN_INTERFACE", "virtual")
-    (tap,) = open_taps(_parse(["-c", channel]))
+    (tap,) = make_taps(tap_options(_parse(["-c", channel])))
     assert isinstance(tap, CanTap) and tap.interface == "virtual" and tap.bus == channel
     seen: list[dict[str, Any]] = []
     real = can.Bus

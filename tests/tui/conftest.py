@@ -3,7 +3,6 @@ virtual bus) or on a capture file, driven by Textual's Pilot."""
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -18,8 +17,9 @@ import pytest
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
 from analyzer.cli import build_parser
-from analyzer.commands.tui import capture_plan, extra_listeners, live_plan
+from analyzer.commands.tui import tui_options
 from analyzer.tui.app import Eg2ScopeApp
+from analyzer.tui.launch import TuiOptions, capture_plan, extra_listeners, live_plan
 from analyzer.tui.notes import Notes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -29,30 +29,30 @@ SIZES = {"80x24": (80, 24), "120x35": (120, 35), "200x50": (200, 50)}
 _readers = ExitStack()  # the captures' readers, closed when the tests end
 
 
-def tui_args(*argv: str) -> argparse.Namespace:
-    """``eg2scope tui ARGV`` as the command line parses it."""
-    return build_parser().parse_args(["tui", *argv])
+def tui_opts(*argv: str) -> TuiOptions:
+    """``eg2scope tui ARGV`` as the command line parses it and hands it on."""
+    return tui_options(build_parser().parse_args(["tui", *argv]))
 
 
-def live_args(output: str | None = None, freeze_on: str | None = None) -> argparse.Namespace:
+def live_opts(output: str | None = None, freeze_on: str | None = None) -> TuiOptions:
     argv = ["--demo"]
     if output:
         argv += ["-o", output]
     if freeze_on:
         argv += ["--freeze-on", freeze_on]
-    return tui_args(*argv)
+    return tui_opts(*argv)
 
 
 def demo_app(
     rig, output: str | None = None, freeze_on: str | None = None, argv: tuple[str, ...] = ()
 ) -> Eg2ScopeApp:
     """The app ``eg2scope tui --demo`` makes, on ``rig``'s simulated buses."""
-    args = live_args(output, freeze_on)
+    opts = live_opts(output, freeze_on)
     if argv:
-        args = tui_args(*(["--demo"] + (["-o", output] if output else []) + list(argv)))
+        opts = tui_opts(*(["--demo"] + (["-o", output] if output else []) + list(argv)))
     notes = Notes()
-    extra = extra_listeners(args, live=True, notes=notes)
-    plan = live_plan(args, rig.taps, rig.protocols, rig.run_hosts, extra)
+    extra = extra_listeners(opts, live=True, notes=notes)
+    plan = live_plan(opts, rig.taps, rig.protocols, rig.run_hosts, extra)
     plan.notes = notes
     return Eg2ScopeApp(plan)
 
@@ -62,9 +62,9 @@ def capture_app(path: Path, *argv: str, speed: float | None = None) -> Eg2ScopeA
     converted as the command converts them)."""
     if speed is not None:
         argv = (*argv, "--speed", f"{speed:g}")
-    args = tui_args(str(path), *argv)
+    opts = tui_opts(str(path), *argv)
     notes = Notes()
-    plan = capture_plan(args, _readers, extra_listeners(args, live=False, notes=notes))
+    plan = capture_plan(opts, _readers, extra_listeners(opts, live=False, notes=notes))
     plan.notes = notes
     return Eg2ScopeApp(plan)
 

@@ -12,19 +12,19 @@ import random
 from pathlib import Path
 
 import pytest
-from conftest import CAPTURES, SIZES, capture_app, demo_app, driving, tui_args, until
+from conftest import CAPTURES, SIZES, capture_app, demo_app, driving, tui_opts, until
 from rich.console import Console
 from textual.command import CommandList, CommandPalette
 from textual.widgets import Input, RichLog, Static
 from textual.widgets._footer import FooterKey
 
-from analyzer.commands.tui import finish, summary_line
 from analyzer.session.batches import RecordSequence
 from analyzer.session.capture import CaptureOptions, open_reader
 from analyzer.session.session import Session, SessionOptions
 from analyzer.sim.rig import DemoRig
 from analyzer.tui.aggregates import LATENCY_KEEP, Aggregates
 from analyzer.tui.app import Eg2ScopeApp, SessionPlan
+from analyzer.tui.launch import finish, summary_line
 from analyzer.tui.layout import row_layout
 from analyzer.tui.notes import Notes
 from analyzer.tui.replay import ReplaySource
@@ -73,7 +73,7 @@ def test_a_failed_session_is_shown_at_once_printed_on_exit_and_exits_1(capsys) -
         return app
 
     app = asyncio.run(scenario())
-    assert finish(tui_args(str(path)), app, Notes()) == 1
+    assert finish(tui_opts(str(path)), app, Notes()) == 1
     err = capsys.readouterr().err
     assert "eg2scope: error: the session failed: KeyError: 'auto' (at " in err
 
@@ -103,7 +103,7 @@ def test_an_exception_in_the_app_stops_the_session_and_exits_non_zero(capsys) ->
     app = asyncio.run(scenario())
     assert app.return_code == 1
     assert app.session._closed  # every listener closed: the session ended
-    assert finish(tui_args("--demo"), app, Notes()) == 1
+    assert finish(tui_opts("--demo"), app, Notes()) == 1
     assert "the TUI failed" in capsys.readouterr().err
 
 
@@ -313,7 +313,7 @@ def test_damage_is_shown_in_the_tui_at_once_and_printed_on_exit(
         return app
 
     app = asyncio.run(scenario())
-    assert finish(tui_args(str(path), *argv), app, Notes()) == 3
+    assert finish(tui_opts(str(path), *argv), app, Notes()) == 3
     err = capsys.readouterr().err
     assert app.session.source.errors[0] in err
 
@@ -357,7 +357,7 @@ def test_empty_panels_say_so_once_a_capture_has_ended(tmp_path: Path) -> None:
         return app
 
     app = asyncio.run(events_and_ages())
-    line = summary_line(tui_args(str(CAPTURES / "serial_session.bin")), app)
+    line = summary_line(tui_opts(str(CAPTURES / "serial_session.bin")), app)
     assert line.endswith("serial_session.bin: read to its end, 27 records decoded, 3 with errors")
 
 

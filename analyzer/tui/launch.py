@@ -1,0 +1,242 @@
+"""``eg2scope tui``'s run: the session plan (the simulated buses, live taps, or a capture
+replayed), the app run on the terminal, and what happened said on stderr once the terminal is
+given back, with the exit status. The app (Textual) is imported only when it runs."""
+
+from __future__ import annotations
+
+import sys
+from contextlib import ExitStack, redirect_stderr
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+from ..errors import EXIT_ERROR, UsageError
+from ..live_runner import (
+    LiveOptions,
+    byte_times,
+    check_recording_output,
+    open_source,
+    recorder,
+    session_protocol,
+)
+from ..session.batches import session_engine
+from ..session.capture import CaptureOptions, byte_protocol, exit_code, open_reader
+from ..session.listener import Listener
+from ..session.session import Session, SessionOptions, signals_call
+from ..sim.rig import DemoOptions, DemoRig
+from ..sources.live import Tap
+from ..sources.tap_options import TapOptions, make_taps
+from .notes import Notes
+from .replay import ReplaySource
+
+if TYPE_CHECKING:
+    from .app import Eg2ScopeApp, SessionPlan
+
+
+@dataclass(frozen=True)
+class TuiOptions:
+    """``eg2scope tui``'s options, typed. ``live``: the live session's (its recording, its
+    end, ``--rerun``); ``taps``: the live sources; ``capture``: the capture to replay instead
+    (None: live); ``demo``: the simulated buses to watch instead (None: none); ``engine``: the
+    session's decoding; ``freeze_on``: the trigger armed at the start (None: none)."""
+
+    live: LiveOptions
+    taps: TapOptions
+    capture: CaptureOptions | None = None
+    demo: DemoOptions | None = None
+    engine: str = "auto"
+    freeze_on: str | None = None
+
+    @property
+    def path(self) -> str | None:
+        """The capture's path (None: live)."""
+        return None if self.capture is None else self.capture.path
+
+
+def run_tui(opts: TuiOptions) -> int:
+    """The TUI on the session the options ask for, until the user quits; the exit status."""
+    if opts.capture is not None and opts.demo is not None:
+        raise UsageError("give a capture file or --demo, not both")
+    if opts.capture is not None:
+        check_capture_engine(opts.capture)  # a usage error of the command line comes first
+    require_terminal()
+    notes = Notes()
+    with ExitStack() as stack:
+        plan = session_plan(opts, stack, notes)
+        plan.notes = notes
+        app = _app(plan, opts.engine)
+        with signals_call(lambda: _stop_app(app)):  # as 'q' does, the recording finished
+            app.run()
+        app.stop_session()  # however the app ended: the session closes every listener
+    return finish(opts, app, notes)
+
+
+def session_plan(opts: TuiOptions, stack: ExitStack, notes: Notes) -> SessionPlan:
+    """The plan of the session the options ask for (``stack`` holds what it opens)."""
+    if opts.demo is not None:
+        rig = stack.enter_context(DemoRig(opts.demo.buses, noise=opts.demo.noise))
+        extra = extra_listeners(opts, live=True, notes=notes)
+        return live_plan(opts, rig.taps, rig.protocols, rig.run_hosts, extra)
+    if opts.capture is not None:
+        return capture_plan(opts, stack, extra_listeners(opts, live=False, notes=notes))
+    taps = make_taps(opts.taps)
+    return live_plan(opts, taps, {}, None, extra_listeners(opts, live=True, notes=notes))
+
+
+def _app(plan: SessionPlan, engine: str) -> Eg2ScopeApp:
+    from .app import Eg2ScopeApp
+
+    try:
+        return Eg2ScopeApp(plan)
+    except ValueError as exc:  # the session cannot be made (an engine that cannot apply)
+        raise UsageError(f"--engine {engine}: {exc}") from None
+
+
+def extra_listeners(opts: TuiOptions, live: bool, notes: Notes) -> list[Listener]:
+    """``--rerun``: the Rerun listener ``record --rerun`` and ``live --rerun`` use. What it says
+    on stderr (where the .rrd went, the web viewer's address) goes to ``notes``: shown in the
+    TUI and printed again once the terminal is given back."""
+    if opts.live.rerun is None:
+        return []  # Rerun is imported only when it is asked for
+    from ..plot.listener import rerun_listener
+
+    with redirect_stderr(notes):  # the listener's output keeps the stream it is given
+        rerun = rerun_listener(opts.live.rerun, source=opts.live.output or opts.path, live=live)
+    return [] if rerun is None else [rerun]
+
+
+def live_plan(
+    opts: TuiOptions,
+    taps: list[Tap],
+    per_bus: dict[str, str],
+    on_start: Any,
+    extra: list[Listener] | None = None,
+) -> SessionPlan:
+    from .app import SessionPlan
+
+    live = opts.live
+    check_recording_output(live)
+    # opened first: a device that does not open fails here (exit 1), before a recording is made
+    source = open_source(taps, live.queue_size, on_start)
+    try:
+        record: Listener | None = recorder(live.output, taps) if live.output else None
+    except BaseException:
+        source.stop()
+        raise
+    options = SessionOptions(
+        protocol=session_protocol(live.protocol),
+        per_bus=per_bus,
+        byte_time_s=byte_times(taps),
+        duration=live.duration,
+        engine=opts.engine,
+    )
+    outputs = ([] if record is None else [record]) + list(extra or [])
+
+    def build(feed: Listener) -> Session:
+        return Session(source, [*outputs, feed], options)
+
+    names = ", ".join(t.bus for t in taps)
+    return SessionPlan(
+        build,
+        live=True,
+        recorder=record,
+        recording_path=live.output,
+        freeze_on=opts.freeze_on,
+        title=f"live: {names}",
+    )
+
+
+def capture_plan(
+    opts: TuiOptions, stack: ExitStack, extra: list[Listener] | None = None
+) -> SessionPlan:
+    """The plan of the capture ``opts.capture`` replayed."""
+    from .app import SessionPlan
+
+    capture = opts.capture
+    if capture is None:
+        raise ValueError("a capture plan needs a capture")
+    if opts.live.output:
+        raise UsageError(
+            "-o records live sources; a capture is already recorded (export from the TUI "
+            "with 'e' instead)"
+        )
+    reader = stack.enter_context(open_reader(capture))
+    source = ReplaySource(reader, capture.speed)
+    options = SessionOptions(protocol=byte_protocol(capture), engine=capture.engine)
+    outputs = list(extra or [])
+
+    def build(feed: Listener) -> Session:
+        return Session(source, [*outputs, feed], options)
+
+    return SessionPlan(
+        build,
+        live=False,
+        replay=source,
+        freeze_on=opts.freeze_on,
+        title=f"capture: {capture.path}",
+    )
+
+
+def check_capture_engine(capture: CaptureOptions) -> None:
+    """UsageError if the engine asked for cannot decode the capture (asked before the terminal
+    is, and before any output such as ``--rerun``'s file is made)."""
+    if capture.engine == "auto":
+        return
+    with open_reader(capture) as reader:
+        try:
+            session_engine(capture.engine, reader.kind, reader.single_stream)
+        except ValueError as exc:
+            raise UsageError(f"--engine {capture.engine}: {exc}") from None
+
+
+def require_terminal() -> None:
+    if not sys.stdout.isatty():
+        raise UsageError(
+            "the TUI needs a terminal; for text use 'eg2scope live', 'eg2scope demo' or "
+            "'eg2scope decode'"
+        )
+
+
+def summary_line(opts: TuiOptions, app: Eg2ScopeApp) -> str:
+    """What the session did: of a capture, what was read of it; live, what was captured."""
+    counts = app.session.counts
+    replay = app.plan.replay
+    if replay is None:
+        where = f" into {opts.live.output}" if opts.live.output else ""
+        return f"{counts.line()}{where}"
+    read = "read to its end" if replay.finished else f"stopped at {replay.position:.0%}"
+    return f"{opts.path}: {read}, {counts.records:,} records decoded, {counts.errors:,} with errors"
+
+
+def finish(opts: TuiOptions, app: Eg2ScopeApp, notes: Notes) -> int:
+    """After the app has gone: what happened, on stderr, and the exit status."""
+    notes.print(sys.stderr)
+    session = app.session
+    print(f"eg2scope: {summary_line(opts, app)}", file=sys.stderr)
+    for listener, exc in session.detached:
+        label = getattr(listener, "label", type(listener).__name__)
+        print(f"eg2scope: error: {label} failed: {exc}", file=sys.stderr)
+    for err in session.source.errors:
+        print(f"eg2scope: {opts.path}: {err}", file=sys.stderr)
+    crashed = app.return_code not in (None, 0)  # the app itself (Textual printed the traceback)
+    if crashed:
+        print("eg2scope: error: the TUI failed (the traceback is above)", file=sys.stderr)
+    if app.failure is not None:
+        print(f"eg2scope: error: {app.failure_text()}", file=sys.stderr)
+    if crashed or app.failure is not None:
+        return EXIT_ERROR
+    damaged = bool(session.source.errors)
+    counts = session.counts
+    if app.plan.replay is not None and app.plan.replay.finished:
+        # the whole capture was read: whatever stopped the app afterwards cut nothing off
+        counts = replace(counts, interrupted=False)
+    return exit_code(counts, damaged=damaged, failed=bool(session.detached))
+
+
+def _stop_app(app: Any) -> None:
+    """Ctrl-C, SIGTERM or SIGHUP: end the session as an interrupt and quit as 'q' does."""
+    if app.session is not None:
+        app.session.interrupt()
+    try:
+        app.call_from_thread(app.action_quit)
+    except RuntimeError:  # the app is not running (yet, or any more)
+        app.exit(0)
