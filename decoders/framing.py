@@ -68,7 +68,7 @@ class ByteStreamDecoder:
         self._last_t: float | None = None
         self._garbage_at: int | None = None  # buffer index where the open garbage run starts
         self._resume = 0  # buffer index of the first byte not decided yet (after an open run)
-        self._garbage_why: str = "no frame header"
+        self._garbage_why: str = M.GARBAGE_NO_HEADER
         self.direction_hint: str | None = None  # direction of the newest chunk, if known
         self._stopping = False  # deciding the held bytes because the capture was stopped
 
@@ -234,7 +234,7 @@ class ByteStreamDecoder:
             out.append(self._truncated(bytes(buf[pos:]), pos))
             return len(buf)
         q = self._damaged_start(buf, pos + 1, q, True)
-        self._garbage(out, pos, q, "incomplete frame followed by a valid one")
+        self._garbage(out, pos, q, M.GARBAGE_INCOMPLETE)
         return q
 
     def _failed(self, out: list[Record], pos: int, length: int, final: bool) -> int | None:
@@ -249,7 +249,7 @@ class ByteStreamDecoder:
             out.append(self._frame(buf, pos, length, False))
             return pos + length
         q = self._damaged_start(buf, pos + 1, q, final)
-        self._garbage(out, pos, q, "bytes of a frame-shaped candidate with a bad checksum")
+        self._garbage(out, pos, q, M.GARBAGE_BAD_CHECKSUM)
         return q
 
     def _keep_from(self, pos: int) -> None:
@@ -310,7 +310,7 @@ class ByteStreamDecoder:
         emit it in pieces of MAX_GARBAGE bytes as it grows."""
         if self._garbage_at is None:
             self._garbage_at = lo
-            self._garbage_why = why or "no frame starts here"
+            self._garbage_why = why or M.GARBAGE_NO_FRAME
         elif why:
             self._garbage_why = why
         while hi - self._garbage_at >= MAX_GARBAGE:

@@ -40,6 +40,11 @@ VALUE_OUT_OF_RANGE: Final = Message(F.OUT_OF_RANGE, "{label} out of range ({lo}-
 
 # -- byte-stream framing (decoders/framing.py) ----------------------------------------------
 FRAMING_GARBAGE: Final = Message(F.GARBAGE, "garbage: {length} bytes belong to no frame ({why})")
+# the reasons FRAMING_GARBAGE gives ({why})
+GARBAGE_NO_HEADER: Final = "no frame header"
+GARBAGE_NO_FRAME: Final = "no frame starts here"
+GARBAGE_INCOMPLETE: Final = "incomplete frame followed by a valid one"
+GARBAGE_BAD_CHECKSUM: Final = "bytes of a frame-shaped candidate with a bad checksum"
 FRAMING_TRUNCATED: Final = Message(
     F.TRUNCATED, "truncated frame: stream ended after {length} bytes"
 )

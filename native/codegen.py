@@ -575,6 +575,11 @@ def messages_module() -> list[str]:
                 lines += _message(name, message)
         if len(lines) > 1:
             parts.append(lines)
+    reasons = [f"{INDENT}// the reasons FRAMING_GARBAGE gives ({{why}})"]
+    for name, text in vars(messages).items():
+        if name.startswith("GARBAGE_"):
+            reasons.append(f"{INDENT}pub const {name}: &str = {rs_str(text)};")
+    parts.append(reasons)
     note = "decoders/messages.py: the errors' and warnings' words, by flag code."
     return module("messages", note, blank_separated(parts))
 

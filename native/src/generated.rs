@@ -1414,4 +1414,10 @@ pub mod messages {
         };
     }
     pub(crate) use lint_too_close;
+
+    // the reasons FRAMING_GARBAGE gives ({why})
+    pub const GARBAGE_NO_HEADER: &str = "no frame header";
+    pub const GARBAGE_NO_FRAME: &str = "no frame starts here";
+    pub const GARBAGE_INCOMPLETE: &str = "incomplete frame followed by a valid one";
+    pub const GARBAGE_BAD_CHECKSUM: &str = "bytes of a frame-shaped candidate with a bad checksum";
 }

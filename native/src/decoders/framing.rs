@@ -195,7 +195,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
             },
             garbage_at: None,
             resume: 0,
-            garbage_why: "no frame header",
+            garbage_why: M::GARBAGE_NO_HEADER,
             undecided: false,
         }
     }
@@ -318,12 +318,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
             return n;
         };
         let q = self.damaged_start(pos + 1, q, true);
-        self.garbage(
-            out,
-            pos,
-            q,
-            Some("incomplete frame followed by a valid one"),
-        );
+        self.garbage(out, pos, q, Some(M::GARBAGE_INCOMPLETE));
         q
     }
 
@@ -346,12 +341,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
             return Some(pos + length);
         };
         let q = self.damaged_start(pos + 1, q, final_);
-        self.garbage(
-            out,
-            pos,
-            q,
-            Some("bytes of a frame-shaped candidate with a bad checksum"),
-        );
+        self.garbage(out, pos, q, Some(M::GARBAGE_BAD_CHECKSUM));
         Some(q)
     }
 
@@ -424,7 +414,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
     fn garbage(&mut self, out: &mut Vec<Record>, lo: usize, hi: usize, why: Option<&'static str>) {
         let mut at = match self.garbage_at {
             None => {
-                self.garbage_why = why.unwrap_or("no frame starts here");
+                self.garbage_why = why.unwrap_or(M::GARBAGE_NO_FRAME);
                 lo
             }
             Some(at) => {
