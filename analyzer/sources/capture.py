@@ -192,6 +192,8 @@ def reader_for(path: str | os.PathLike[str]) -> str:
     that cannot be read compressed (``.mcap.gz``, ``.mf4.gz``)."""
     p = Path(path)
     held = sniff.sniff(p)
+    if held == "bytes":
+        return CAPTURE_READERS[".gz"] if can_files.is_gzip(p) else RAW_BYTES
     if held is not None:
         if can_files.is_gzip(p) and held not in can_files.GZIP_FORMATS:
             raise UsageError(can_files.compressed_unreadable(p, f".{held}"))

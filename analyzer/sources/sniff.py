@@ -1,7 +1,9 @@
 """What a capture file holds, told from its first bytes, whatever its name: a candump log saved
 as ``.txt`` or with no suffix at all is still a candump log, and a ``.log`` may hold a PCAN
 trace. Binary formats by their magic (MCAP, BLF ``LOGG``, MF4 ``MDF``), text logs by their first
-line that is not blank or a comment. ``None``: nothing recognised (the suffix decides).
+line that is not blank or a comment, a raw dump of a serial line by the control bytes no text
+log holds (``bytes``: a serial dump saved as ``.log`` is still a dump). ``None``: nothing
+recognised (the suffix decides).
 
 native/src/sources/sniff.rs mirrors this module: both engines choose the same reader.
 """
@@ -30,6 +32,9 @@ ASC_STARTS = (b"date ", b"base ", b"begin triggerblock", b"internal events logge
               b"no internal events logged")  # fmt: skip
 CSV_START = b"timestamp,arbitration_id,"
 TRC_VERSION = b";$FILEVERSION"
+#: bytes no text log holds (every C0 control but tab, line feed, vertical tab, form feed,
+#: carriage return and escape): a head with one is a raw byte dump
+BINARY = frozenset(range(0x20)) - {0x09, 0x0A, 0x0B, 0x0C, 0x0D, 0x1B}
 
 
 def head(path: str | os.PathLike[str]) -> bytes:
@@ -56,7 +61,7 @@ def head(path: str | os.PathLike[str]) -> bytes:
 
 def sniff(path: str | os.PathLike[str]) -> str | None:
     """The format of a capture file from its content: "mcap", "blf", "mf4", "candump", "trc",
-    "asc", "csv", or None."""
+    "asc", "csv", "bytes" (a raw serial dump), or None."""
     return sniff_head(head(path))
 
 
@@ -64,6 +69,8 @@ def sniff_head(data: bytes) -> str | None:
     for magic, fmt in MAGIC.items():
         if data.startswith(magic):
             return fmt
+    if not BINARY.isdisjoint(data):
+        return "bytes"
     full = len(data) >= HEAD_SIZE
     if data.startswith(candump.BOM):
         data = data[len(candump.BOM) :]

@@ -89,7 +89,9 @@ def _named(result: tuple[int, str, str], path: Path) -> tuple[int, str, str]:
         (b"     1)     17535  00000100  8  00 00 00 00 00 00 00 00\n", "trc"),
         (b"date Sam Sep 30 15:06:13.191 2017\nbase hex timestamps absolute\n", "asc"),
         (b"timestamp,arbitration_id,extended,remote,error,dlc,data\n", "csv"),
-        (b"\xeb\x90\x01\x01\x41\x43", None),  # a serial frame
+        (b"\xeb\x90\x01\x01\x41\x43", "bytes"),  # a serial frame
+        (b"\x01\x03\x00\x3c\x00\x06\x05\xc4", "bytes"),  # a Modbus request
+        (b"\x1b[1mcolour\x1b[0m\n", None),  # escapes are text
         (b"hello\nworld\n", None),
     ],
 )
@@ -103,6 +105,22 @@ def test_a_log_holding_another_format_is_read_as_that_format(tmp_path: Path) -> 
     shutil.copy(trc, as_log)
     assert decode_both(as_log) == decode_both(trc)
     assert capture.reader_for(as_log) == "analyzer.sources.capture:CanLogReader"
+
+
+@pytest.mark.parametrize("name", ["serial_session.bin", "modbus_session.bin"])
+@pytest.mark.parametrize("saved_as", ["dump.log", "dump.txt", "dump.log.gz"])
+def test_a_serial_dump_is_read_as_one_whatever_its_name(
+    tmp_path: Path, name: str, saved_as: str
+) -> None:
+    """A raw dump saved as ``.log`` (a candump suffix) is still a dump, by its bytes."""
+    dump = CAPTURES / name
+    renamed = tmp_path / saved_as
+    data = dump.read_bytes()
+    renamed.write_bytes(gzip.compress(data) if saved_as.endswith(".gz") else data)
+    code, text, err = decode_both(renamed)
+    assert (code, err) == decode_both(dump)[::2]
+    assert records(text) == records(decode_both(dump)[1])
+    assert "cannot parse" not in err
 
 
 def test_a_blf_padded_at_its_end_is_complete_and_a_cut_one_is_not(tmp_path: Path) -> None:

@@ -83,6 +83,14 @@ fn suffixes(path: &Path) -> Vec<String> {
 pub fn reader_for(path: &Path) -> io::Result<ReaderKind> {
     match crate::sources::sniff::sniff(path) {
         Some("candump") => return Ok(ReaderKind::Candump),
+        Some("bytes") => {
+            let gz = suffixes(path).last().is_some_and(|s| s == ".gz");
+            return Ok(if gz {
+                ReaderKind::GzipRaw
+            } else {
+                ReaderKind::Raw
+            });
+        }
         Some(other) => {
             return Err(io::Error::new(
                 io::ErrorKind::Unsupported,

@@ -27,6 +27,12 @@ const ASC_STARTS: [&[u8]; 5] = [
 const CSV_START: &[u8] = b"timestamp,arbitration_id,";
 const TRC_VERSION: &[u8] = b";$FILEVERSION";
 
+/// sniff.py `BINARY`: a C0 control byte no text log holds (all but tab, line feed, vertical
+/// tab, form feed, carriage return and escape) makes the head a raw byte dump
+fn binary(b: u8) -> bool {
+    b < 0x20 && !matches!(b, 0x09..=0x0D | 0x1B)
+}
+
 /// Python's `bytes.isspace` characters (`bytes.strip()`).
 fn is_space(b: u8) -> bool {
     matches!(b, b' ' | b'\t' | b'\n' | b'\r' | 0x0b | 0x0c)
@@ -51,6 +57,9 @@ pub fn sniff(path: &Path) -> Option<&'static str> {
 pub fn sniff_head(data: &[u8]) -> Option<&'static str> {
     if let Some((_, fmt)) = MAGIC.iter().find(|(magic, _)| data.starts_with(magic)) {
         return Some(fmt);
+    }
+    if data.iter().any(|&b| binary(b)) {
+        return Some("bytes");
     }
     let full = data.len() >= HEAD_SIZE;
     let data = data.strip_prefix(BOM).unwrap_or(data);
@@ -130,7 +139,8 @@ mod tests {
             sniff_head(b"timestamp,arbitration_id,extended\n"),
             Some("csv")
         );
-        assert_eq!(sniff_head(b"\xeb\x90\x01\x01\x41\x43"), None);
+        assert_eq!(sniff_head(b"\xeb\x90\x01\x01\x41\x43"), Some("bytes"));
+        assert_eq!(sniff_head(b"\x1b[1mcolour\x1b[0m\n"), None);
         assert_eq!(sniff_head(b""), None);
     }
 }
