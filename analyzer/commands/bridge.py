@@ -8,7 +8,7 @@ from typing import Any
 
 from ..live_runner import run_session
 from ..sources.tap_options import make_taps
-from .common import add_session_arguments, baud_rate, live_options
+from .common import add_session_arguments, live_options
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_line_arguments, add_naming_arguments, add_wait_argument, tap_options
 
@@ -30,7 +30,7 @@ def add_subparser(sub: Any) -> None:
     )
     parser.add_argument("host_port", metavar="HOST_PORT", help="port the host controller is on")
     parser.add_argument("device_port", metavar="DEVICE_PORT", help="port the gripper is on")
-    parser.add_argument("--baud", type=baud_rate, default=115200, help="baud rate (default 115200)")
+    parser.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     add_naming_arguments(parser, can=False)
     add_wait_argument(parser)
     parser.add_argument(

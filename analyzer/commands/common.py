@@ -38,18 +38,6 @@ def positive_int(text: str) -> int:
     return _whole_number(text, 1)
 
 
-BAUD_RATES = (300, 12_000_000)  # what UARTs and USB adapters run at (FTDI tops out at 12M)
-
-
-def baud_rate(text: str) -> int:
-    """argparse type: a serial baud rate (300 to 12,000,000; 9600, 115200, 1000000, ...)."""
-    value = _whole_number(text, 1)
-    lo, hi = BAUD_RATES
-    if not lo <= value <= hi:
-        raise argparse.ArgumentTypeError(f"a baud rate is {lo:,}-{hi:,}, not {value:,}")
-    return value
-
-
 def positive_float(text: str) -> float:
     try:
         value = float(text)

@@ -22,7 +22,6 @@ from decoders.model import EG2_CAN
 from decoders.registry import resolve_protocol
 
 from ..sources.tap_options import TapOptions
-from .common import baud_rate
 
 # the namespace keys add_bus_arguments fills (create_bus_from_namespace reads the same)
 CAN_KEYS = ("interface", "channel", "bitrate", "fd", "data_bitrate", "timing")
@@ -45,9 +44,7 @@ def add_source_arguments(parser: argparse.ArgumentParser, bridge: bool = True) -
         help="serial port or pyserial URL to watch (never written to); give it "
         "twice to watch one adapter per RS232 wire",
     )
-    ser.add_argument(
-        "--baud", type=baud_rate, default=115200, help="serial baud rate (default 115200)"
-    )
+    ser.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
     add_line_arguments(ser)
     if bridge:
         ser.add_argument(

@@ -43,9 +43,6 @@ CAPTURES = ROOT / "captures"
         (["live", "--serial", "/dev/null", "--duration", "-1"], "positive number"),
         (["demo", "--noise", "-1"], "probability"),
         (["demo", "--noise", "1.5"], "probability"),
-        (["live", "--serial", "/dev/null", "--baud", "7"], "a baud rate is 300-12,000,000"),
-        (["live", "--serial", "/dev/null", "--baud", "2e7"], "not a whole number"),
-        (["bridge", "/dev/null", "/dev/zero", "--baud", "20000000"], "not 20,000,000"),
     ],
 )
 def test_usage_errors_fail_at_once_with_exit_2(args: list[str], words: str) -> None:
