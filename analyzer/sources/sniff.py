@@ -2,7 +2,8 @@
 as ``.txt`` or with no suffix at all is still a candump log, and a ``.log`` may hold a PCAN
 trace. Binary formats by their magic (MCAP, BLF ``LOGG``, MF4 ``MDF``), text logs by their first
 line that is not blank or a comment, a raw dump of a serial line by the control bytes no text
-log holds (``bytes``: a serial dump saved as ``.log`` is still a dump). ``None``: nothing
+log holds and the valid frames in them (``bytes``: a serial dump saved as ``.log`` is still a
+dump; random bytes are not). ``None``: nothing
 recognised (the suffix decides).
 
 native/src/sources/sniff.rs mirrors this module: both engines choose the same reader.
@@ -14,6 +15,8 @@ import gzip
 import os
 import zlib
 from pathlib import Path
+
+from decoders.registry import detect_protocol
 
 from . import candump
 
@@ -69,7 +72,7 @@ def sniff_head(data: bytes) -> str | None:
     for magic, fmt in MAGIC.items():
         if data.startswith(magic):
             return fmt
-    if not BINARY.isdisjoint(data):
+    if not BINARY.isdisjoint(data) and detect_protocol(data):
         return "bytes"
     full = len(data) >= HEAD_SIZE
     if data.startswith(candump.BOM):

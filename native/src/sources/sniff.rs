@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use crate::decoders::registry::detect_protocol;
 use crate::sources::candump::{first_bytes, parses_as_candump, BOM, HEAD_SIZE};
 
 /// sniff.py `LINES`: lines looked at for the first significant one.
@@ -58,7 +59,7 @@ pub fn sniff_head(data: &[u8]) -> Option<&'static str> {
     if let Some((_, fmt)) = MAGIC.iter().find(|(magic, _)| data.starts_with(magic)) {
         return Some(fmt);
     }
-    if data.iter().any(|&b| binary(b)) {
+    if data.iter().any(|&b| binary(b)) && detect_protocol(data).is_some() {
         return Some("bytes");
     }
     let full = data.len() >= HEAD_SIZE;
