@@ -83,15 +83,21 @@ def _level(high: bool) -> str:
     return "high" if high else "low"
 
 
+BAUD_RATES = (300, 12_000_000)  # what UARTs and USB adapters run at (FTDI's fastest: 12M)
+
+
 def check_port(port: str, serial_kwargs: dict[str, Any]) -> None:
     """UsageError if ``port`` with these settings can never be opened: an empty name, an
-    unknown URL scheme, a malformed URL, a setting pyserial refuses (a negative baud rate)."""
+    unknown URL scheme, a malformed URL, a setting pyserial refuses, a baud rate no serial line
+    runs at."""
     if not isinstance(port, str) or not port.strip() or "\0" in port:
         raise UsageError(f"malformed serial port name {port!r}")
     baudrate = serial_kwargs.get("baudrate")
-    if not isinstance(baudrate, int) or isinstance(baudrate, bool) or baudrate <= 0:
+    lo, hi = BAUD_RATES
+    if not isinstance(baudrate, int) or isinstance(baudrate, bool) or not lo <= baudrate <= hi:
         raise UsageError(
-            f"impossible baud rate {baudrate!r} for {port}: it must be a positive number"
+            f"impossible baud rate {baudrate!r} for {port}: a serial line runs at "
+            f"{lo:,} to {hi:,} baud"
         )
     try:
         probe = serial.serial_for_url(port, do_not_open=True, **serial_kwargs)

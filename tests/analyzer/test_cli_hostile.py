@@ -43,6 +43,9 @@ CAPTURES = ROOT / "captures"
         (["live", "--serial", "/dev/null", "--duration", "-1"], "positive number"),
         (["demo", "--noise", "-1"], "probability"),
         (["demo", "--noise", "1.5"], "probability"),
+        (["live", "--serial", "/dev/null", "--baud", "7"], "impossible baud rate 7"),
+        (["live", "--serial", "/dev/null", "--baud", "20000000"], "300 to 12,000,000 baud"),
+        (["bridge", "/dev/null", "/dev/zero", "--baud", "50"], "impossible baud rate 50"),
     ],
 )
 def test_usage_errors_fail_at_once_with_exit_2(args: list[str], words: str) -> None:
