@@ -24,7 +24,16 @@ from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import CanFrame, Record
 from decoders.registers import BY_KEY
 
-from .hostlink import ByteLink, CanLink, GripperReading, HostResult, Link
+from .hostlink import (
+    MIN_GAP_S,
+    RETRIES,
+    TIMEOUT_S,
+    ByteLink,
+    CanLink,
+    GripperReading,
+    HostResult,
+    Link,
+)
 
 PROTOCOLS = ("serial", "modbus", "can")
 ALIASES = {
@@ -59,6 +68,7 @@ ALIASES = {
     )
 )
 MODBUS_MIN_SPEED, MODBUS_MIN_FORCE = 10, 100  # the registers' ranges (1011, 1012)
+SPEED, FORCE = 500, 100  # what the host sets: half speed, 100 g
 
 
 @dataclass(slots=True)
@@ -321,11 +331,11 @@ def connect(
     result: HostResult,
     quirks: HostQuirks,
     *,
-    speed: int,
-    force: int,
-    timeout_s: float,
-    min_gap_s: float,
-    retries: int,
+    speed: int = SPEED,
+    force: int = FORCE,
+    timeout_s: float = TIMEOUT_S,
+    min_gap_s: float = MIN_GAP_S,
+    retries: int = RETRIES,
 ) -> Driver:
     """The driver of a protocol ("serial", "modbus", "can" or an alias) on its link: a serial
     port path or an open pyserial port for serial and Modbus; a python-can bus, or a virtual

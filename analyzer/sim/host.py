@@ -24,8 +24,8 @@ from collections.abc import Iterable
 import can
 import serial
 
-from .dialects import Driver, HostQuirks, connect
-from .hostlink import GripperReading, HostResult, Stopped
+from .dialects import FORCE, SPEED, Driver, HostQuirks, connect
+from .hostlink import MIN_GAP_S, RETRIES, TIMEOUT_S, GripperReading, HostResult, Stopped
 
 __all__ = ["GripperReading", "HostQuirks", "HostResult", "run_host_cycle"]
 
@@ -38,12 +38,12 @@ def run_host_cycle(
     stop_event: threading.Event | None = None,
     quirks: HostQuirks | None = None,
     *,
-    speed: int = 500,
-    force: int = 100,
+    speed: int = SPEED,
+    force: int = FORCE,
     poll_s: float = 0.025,
-    timeout_s: float = 0.03,
-    min_gap_s: float = 0.005,
-    retries: int = 2,
+    timeout_s: float = TIMEOUT_S,
+    min_gap_s: float = MIN_GAP_S,
+    retries: int = RETRIES,
     dwell_s: float = 0.1,
     motion_timeout_s: float = 3.0,
     result: HostResult | None = None,

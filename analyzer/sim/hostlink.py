@@ -28,6 +28,10 @@ from ..sources.can_message import frame_to_message, message_to_frame
 from .endpoints import BAUDRATE
 
 SILENCE_S = 0.002  # a pause this long ends a frame (3.5 characters are 0.3 ms at 115200)
+# a host's pace: the answer awaited this long, resent this many times, frames this far apart
+TIMEOUT_S = 0.03
+RETRIES = 2
+MIN_GAP_S = 0.005
 
 
 @dataclass(slots=True)
