@@ -28,9 +28,10 @@ DESCRIPTION = "\n\n".join(
         "SocketCAN device:",
         "  sudo ip link add dev vcan0 type vcan && sudo ip link set up vcan0\n"
         "  eg2scope sim can -i socketcan -c vcan0",
-        "--scenario plays a scripted scenario with the built-in host on the first gripper: "
-        "grip cycles whose true outcome is known (a part caught, missed, slipping, a stall, a "
-        "lost command, a bus-off on CAN); --truth writes each cycle as it played.",
+        "--scenario plays a scripted scenario with the built-in host on the first gripper, over "
+        "and over (a sniffer started later still sees whole cycles): grip cycles whose true "
+        "outcome is known (a part caught, missed, slipping, a stall, a lost command, a bus-off "
+        "on CAN); --truth writes each cycle as it played.",
         "Runs until Ctrl-C.",
     )
 )

@@ -32,6 +32,9 @@ from .hostlink import GripperReading, HostResult, Stopped
 from .scenarios import CLOSING, Scenario, Step
 
 BUS_OFF_S: Final = 0.3  # how long the gripper's node stays bus-off
+# the answer awaited longer than a pick-and-place host does (30 ms): a busy machine must not
+# turn a scripted cycle into an unanswered one
+TIMEOUT_S: Final = 0.1
 UNANSWERED_WATCH_S: Final = 0.3  # polling after a command that got no answer
 HOLD_POLLS: Final = 2  # polls of state 6 before a part slips (the grip is seen first)
 # the states that end a command's motion
@@ -99,7 +102,7 @@ class TruthLog:
         with self._lock:
             self.played.append(played)
             if self.out is not None:
-                self.out.write(json.dumps(played.to_json()) + "\n")
+                self.out.write(json.dumps(played.to_json(), separators=(",", ":")) + "\n")
                 self.out.flush()
 
 
@@ -122,7 +125,8 @@ class _Watch:
 class Player:
     """Plays ``scenario`` on gripper ``device`` through ``driver`` (the host's side) and
     ``world`` (the server's knobs) until ``stop`` is set. ``pace``: the simulated jaw's speed-up;
-    the host's pauses shrink with it."""
+    the host's pauses shrink with it. ``repeat``: play the script over and over even if the
+    scenario does not."""
 
     def __init__(
         self,
@@ -136,6 +140,7 @@ class Player:
         log: TruthLog,
         *,
         pace: float = 1.0,
+        repeat: bool = False,
         poll_s: float = 0.025,
         dwell_s: float = 0.1,
         motion_timeout_s: float = 3.0,
@@ -149,6 +154,7 @@ class Player:
         self.stop = stop
         self.log = log
         self.pace = pace
+        self.repeat = repeat or scenario.repeat
         self.poll_s = poll_s
         self.dwell_s = dwell_s / pace
         self.motion_timeout_s = motion_timeout_s
@@ -172,7 +178,7 @@ class Player:
             for step in steps:
                 self._play(index, step)
                 index += 1
-            if not self.scenario.repeat:
+            if not self.repeat:
                 return
 
     def _play(self, index: int, step: Step) -> None:
@@ -271,9 +277,13 @@ def play_scenario(
     *,
     quirks: HostQuirks | None = None,
     pace: float = 1.0,
+    repeat: bool = False,
 ) -> None:
     """Connect the host's side (as ``host.run_host_cycle`` takes its port or bus) and play the
-    scenario until ``stop`` is set; for a thread."""
+    scenario (over and over if ``repeat``) until ``stop`` is set; for a thread."""
     quirks = quirks if quirks is not None else HostQuirks()
-    driver = connect(protocol, port_or_bus, stop, HostResult(), quirks)
-    Player(scenario, protocol, bus, driver, world, device, stop, log, pace=pace).run()
+    driver = connect(protocol, port_or_bus, stop, HostResult(), quirks, timeout_s=TIMEOUT_S)
+    player = Player(
+        scenario, protocol, bus, driver, world, device, stop, log, pace=pace, repeat=repeat
+    )
+    player.run()

@@ -1,7 +1,7 @@
 """``eg2scope sim``'s run: simulated grippers served on a virtual multi-drop serial line (ptys)
 or a python-can bus until Ctrl-C or SIGTERM, where to connect printed, and what was served
 printed at the end. With a scenario the built-in host plays it on the first gripper (``play``),
-its truth written as JSON lines to the truth file."""
+over and over, its truth written as JSON lines to the truth file."""
 
 from __future__ import annotations
 
@@ -230,6 +230,7 @@ def _host_thread(
             truth,
             quirks=quirks,
             pace=opts.pace,
+            repeat=True,  # a sniffer started later still sees whole cycles
         )
     else:
         run = functools.partial(
