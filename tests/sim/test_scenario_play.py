@@ -11,7 +11,6 @@ unanswered, error frames on CAN while the node is bus-off.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -142,7 +141,7 @@ def test_the_truth_gives_the_width_at_contact_in_mm(captures: dict[str, Capture]
     assert slip["warnings"] == ["slip"] and slip["slip_to"] == 252
 
 
-def test_scenario_runs_are_quick(captures: dict[str, Capture], tmp_path: Path) -> None:
+def test_scenario_runs_are_quick(captures: dict[str, Capture]) -> None:
     """A scenario plays out in a second or two at the tests' time scale."""
     for name in NAMES:
         truth = captures[name].truth
