@@ -36,9 +36,11 @@ native: $(STAMP)
 	@rm -f $(NATIVE)
 	@$(MAKE) --no-print-directory $(NATIVE)
 
-# the TUI on a terminal; today's text output when stdout is not one (CI, pipes)
+# the TUI on a terminal; today's text output when stdout is not one (CI, pipes); the grip
+# cycles tour every outcome (caught, missed, slipping, stalled, unanswered, bus-off on CAN)
+DEMO_SCENARIO = --scenario tour
 demo: venv
-	@if [ -t 1 ]; then $(BIN)/eg2scope tui --demo; else $(BIN)/eg2scope demo; fi
+	@if [ -t 1 ]; then $(BIN)/eg2scope tui --demo $(DEMO_SCENARIO); else $(BIN)/eg2scope demo $(DEMO_SCENARIO); fi
 
 lint: venv
 	$(BIN)/ruff check .

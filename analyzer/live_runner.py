@@ -250,9 +250,9 @@ def run_demo(
     from .sim.rig import DemoRig
 
     check_recording_output(options)  # before the banner and the rig
-    with DemoRig(demo.buses, noise=demo.noise) as rig:
+    with DemoRig.of(demo) as rig:
         print(
-            f"eg2scope {command}: simulated grippers 1 and 2 on "
+            f"eg2scope {command}: {_demo_grippers(demo)} on "
             + ", ".join(f"{t.bus} ({type(t).__name__})" for t in rig.taps)
             + "; Ctrl-C to stop",
             file=sys.stderr,
@@ -266,3 +266,10 @@ def run_demo(
             extra=extra,
             on_done=on_done,
         )
+
+
+def _demo_grippers(demo: DemoOptions) -> str:
+    """Who is simulated, for the banner."""
+    if demo.scenario is None:
+        return "simulated grippers 1 and 2"
+    return f"simulated gripper 1 playing scenario {demo.scenario.name!r}"

@@ -9,6 +9,7 @@ identifier layout) come from the decoders that read them.
 from __future__ import annotations
 
 import struct
+from typing import Final
 
 from .eg2_can import OP_READ, OP_WRITE
 from .eg2_serial import REQUEST_HEADER, RESPONSE_HEADER, checksum
@@ -106,6 +107,43 @@ def can_write_response(
     """The answer to a write of n bytes: DLC 1 with data[0] = n (DLC 8 if padded)."""
     data = bytes((n,)) + (bytes(7) if padded else b"")
     return CanFrame(t, can_id(OP_WRITE, address, device), data)
+
+
+# -- SocketCAN error frames (linux/can/error.h) ----------------------------------------------
+
+# classes, in the identifier
+CAN_ERR_CRTL: Final = 0x004  # controller problem: data[1] says which
+CAN_ERR_PROT: Final = 0x008  # protocol violation: data[2] its type, data[3] where
+CAN_ERR_BUSOFF: Final = 0x040
+CAN_ERR_BUSERROR: Final = 0x080
+CAN_ERR_RESTARTED: Final = 0x100
+CAN_ERR_CNT: Final = 0x200  # the TX and RX error counters are in data[6] and data[7]
+# data[1]: the controller's status
+CAN_ERR_CRTL_TX_WARNING: Final = 0x08
+CAN_ERR_CRTL_TX_PASSIVE: Final = 0x20
+CAN_ERR_CRTL_ACTIVE: Final = 0x40
+# data[2]: the protocol violation
+CAN_ERR_PROT_BIT0: Final = 0x08  # could not send a dominant bit
+CAN_ERR_PROT_TX: Final = 0x80  # the error came while transmitting
+
+
+def can_error_frame(
+    error_class: int,
+    *,
+    controller: int = 0,
+    protocol: int = 0,
+    counters: tuple[int, int] | None = None,
+    t: float | None = None,
+) -> CanFrame:
+    """A SocketCAN error frame (DLC 8): the class bits in the identifier, the controller status
+    in data[1], the protocol violation in data[2]; ``counters`` (TX, RX) set CAN_ERR_CNT and
+    go in data[6] and data[7]."""
+    data = bytearray(8)
+    data[1], data[2] = controller, protocol
+    if counters is not None:
+        error_class |= CAN_ERR_CNT
+        data[6], data[7] = (min(255, c) for c in counters)
+    return CanFrame(t, error_class, bytes(data), is_extended=False, is_error=True)
 
 
 def candump_line(frame: CanFrame, channel: str = "can0") -> str:

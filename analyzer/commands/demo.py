@@ -5,10 +5,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..errors import UsageError
 from ..live_runner import run_demo
 from ..sim.rig import BUSES, DemoOptions
-from .common import add_session_arguments, live_options, probability
+from ..sim.scenarios import NAMES, Scenario, scenario
+from .common import add_session_arguments, live_options, positive_float, probability
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
+
+DEFAULT_NOISE = 0.01
 
 
 def add_subparser(sub: Any) -> None:
@@ -22,7 +26,14 @@ def add_subparser(sub: Any) -> None:
             "taps, decoded live. A little line noise is injected so checksum errors and garbage "
             "show up. Ctrl-C or SIGTERM ends it."
         ),
-        epilog=epilog("example:\n  eg2scope demo --duration 10 -o demo.mcap", LIVE_EXIT_STATUS),
+        epilog=epilog(
+            "examples:\n"
+            "  eg2scope demo --duration 10 -o demo.mcap\n"
+            "  eg2scope demo --scenario tour                 # every kind of grip cycle in turn\n"
+            "  eg2scope demo --scenario grip:300 --truth truth.jsonl\n"
+            "  eg2scope sim --list-scenarios                 # the scenarios, one line each",
+            LIVE_EXIT_STATUS,
+        ),
         formatter_class=HelpFormatter,
     )
     add_demo_arguments(parser)
@@ -48,6 +59,30 @@ def bus_list(text: str) -> tuple[str, ...]:
     return buses
 
 
+def scenario_type(text: str) -> Scenario:
+    """argparse type: a scenario, ``NAME`` or ``NAME:WIDTH``."""
+    try:
+        return scenario(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+SCENARIO_HELP = (
+    f"play a scripted scenario ({', '.join(NAMES)}; NAME:WIDTH gives its part a width, "
+    "100-900 of the stroke; 'eg2scope sim --list-scenarios' says what each does) instead of "
+    "the pick-and-place cycles: its host sends the motion commands and polls state, opening "
+    "and force, and every grip cycle's true outcome is known (--truth)"
+)
+TIME_SCALE_HELP = (
+    "the simulated jaw moves and squeezes F times faster, and the scenario's host pauses F "
+    "times shorter (default 1: as the real gripper)"
+)
+TRUTH_HELP = (
+    "with --scenario: write each grip cycle as it played to this file, one JSON object a line "
+    "(the command, the true outcome, the width at contact, when it began and ended)"
+)
+
+
 def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("demo (simulated grippers)")
     group.add_argument(
@@ -60,15 +95,34 @@ def add_demo_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--noise",
         type=probability,
-        default=0.01,
+        default=None,
         metavar="P",
-        help="probability of a corrupted, garbled or dropped response (default 0.01)",
+        help="probability of a corrupted, garbled or dropped response (default 0.01; 0 with "
+        "--scenario, whose truth noise would spoil)",
     )
+    group.add_argument("--scenario", type=scenario_type, metavar="NAME", help=SCENARIO_HELP)
+    group.add_argument(
+        "--time-scale", type=positive_float, default=1.0, metavar="F", help=TIME_SCALE_HELP
+    )
+    group.add_argument("--truth", metavar="FILE", help=TRUTH_HELP)
 
 
 def demo_options(args: argparse.Namespace) -> DemoOptions:
     """The demo options of a command's arguments, typed."""
-    return DemoOptions(buses=args.buses, noise=args.noise)
+    noise = args.noise
+    if noise is None:
+        noise = 0.0 if args.scenario is not None else DEFAULT_NOISE
+    if args.truth is not None and args.scenario is None:
+        raise UsageError("--truth needs --scenario (the truth is a scenario's)")
+    if args.scenario is not None and args.scenario.needs_can and "can" not in args.buses:
+        raise UsageError(f"scenario {args.scenario.name!r} needs the CAN bus in --buses")
+    return DemoOptions(
+        buses=args.buses,
+        noise=noise,
+        scenario=args.scenario,
+        pace=args.time_scale,
+        truth=args.truth,
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,7 +6,10 @@ import argparse
 from typing import Any
 
 from ..errors import UsageError
+from ..sim.scenarios import listing
 from ..sim.serve import SimOptions, serve
+from .common import positive_float
+from .demo import SCENARIO_HELP, TIME_SCALE_HELP, scenario_type
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog
 
 DESCRIPTION = "\n\n".join(
@@ -25,6 +28,10 @@ DESCRIPTION = "\n\n".join(
         "SocketCAN device:",
         "  sudo ip link add dev vcan0 type vcan && sudo ip link set up vcan0\n"
         "  eg2scope sim can -i socketcan -c vcan0",
+        "--scenario plays a scripted scenario with the built-in host on the first gripper, over "
+        "and over (a sniffer started later still sees whole cycles): grip cycles whose true "
+        "outcome is known (a part caught, missed, slipping, a stall, a lost command, a bus-off "
+        "on CAN); --truth writes each cycle as it played.",
         "Runs until Ctrl-C.",
     )
 )
@@ -40,13 +47,18 @@ def add_subparser(sub: Any) -> None:
             "  eg2scope sim serial                      # one gripper, ID 1\n"
             "  eg2scope sim modbus --id 1 --id 2 --noise 0.01\n"
             "  eg2scope sim can -i socketcan -c vcan0 --host-cycle\n"
-            "  eg2scope sim serial --host-cycle         # traffic for a sniffer on the tap",
+            "  eg2scope sim serial --host-cycle         # traffic for a sniffer on the tap\n"
+            "  eg2scope sim --list-scenarios\n"
+            "  eg2scope sim modbus --scenario slip --truth -   # the truth on stdout",
             LIVE_EXIT_STATUS,
         ),
         formatter_class=HelpFormatter,
     )
     parser.add_argument(
-        "protocol", choices=("serial", "modbus", "can"), help="which gripper model to simulate"
+        "protocol",
+        nargs="?",
+        choices=("serial", "modbus", "can"),
+        help="which gripper model to simulate (needed unless --list-scenarios)",
     )
     parser.add_argument(
         "--id",
@@ -85,6 +97,22 @@ def add_subparser(sub: Any) -> None:
         help="also run the built-in scripted host (pick-and-place cycles on every ID) on the "
         "host drop (CAN: on the same bus), so a sniffer sees real traffic",
     )
+    parser.add_argument("--scenario", type=scenario_type, metavar="NAME", help=SCENARIO_HELP)
+    parser.add_argument(
+        "--list-scenarios",
+        action="store_true",
+        help="print the scenarios, one line each, and exit",
+    )
+    parser.add_argument(
+        "--time-scale", type=positive_float, default=1.0, metavar="F", help=TIME_SCALE_HELP
+    )
+    parser.add_argument(
+        "--truth",
+        metavar="FILE",
+        help="with --scenario: write each grip cycle as it played to FILE ('-': stdout), one "
+        "JSON object a line (the command, the true outcome, the width at contact, when it "
+        "began and ended)",
+    )
     parser.add_argument(
         "--short-registers",
         action="store_true",
@@ -108,11 +136,21 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.list_scenarios:
+        print(listing())
+        return 0
     return serve(sim_options(args))
 
 
 def sim_options(args: argparse.Namespace) -> SimOptions:
     """The simulator's options, typed; a usage error for an ID, noise or width out of range."""
+    if args.protocol is None:
+        raise UsageError("give a protocol: serial, modbus or can")
+    scenario = args.scenario
+    if scenario is not None and scenario.needs_can and args.protocol != "can":
+        raise UsageError(f"scenario {scenario.name!r} needs the CAN bus: eg2scope sim can")
+    if args.truth is not None and scenario is None:
+        raise UsageError("--truth needs --scenario (the truth is a scenario's)")
     ids = tuple(args.ids or [1])
     limit = 16382 if args.protocol == "can" else 254
     for device in ids:
@@ -132,6 +170,9 @@ def sim_options(args: argparse.Namespace) -> SimOptions:
         interface=args.interface,
         channel=args.channel,
         bitrate=args.bitrate,
+        scenario=scenario,
+        truth=args.truth,
+        pace=args.time_scale,
     )
 
 

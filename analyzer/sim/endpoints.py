@@ -17,9 +17,13 @@ frame precedes the retransmitted response), ``garbage`` (probability that random
 line before a response; on CAN a foreign 11-bit frame) and ``drop`` (probability that a
 response is never sent).
 
+Scripted trouble, for scenarios: ``mute`` (a gripper hears nothing until unmuted: a lost
+command), ``place_jam`` (an obstruction that stalls the jaw) and, on CAN, ``bus_off`` (the
+error frames of a node going error-passive and bus-off, silence, the restart).
+
 The models are shared with the caller: hold ``server.lock`` while touching them from another
-thread (or use the helpers ``place_object``, ``inject_fault``, ``snapshot``), and pass time as
-``server.clock()``.
+thread (or use the helpers ``place_object``, ``place_jam``, ``inject_fault``, ``snapshot``), and
+pass time as ``server.clock()``.
 """
 
 from __future__ import annotations
@@ -49,6 +53,7 @@ from decoders.model import EG2_CAN, FRAME, REQUEST, CanFrame, Chunk, Record
 
 from ..lifecycle import Running
 from ..sources.can_message import frame_to_message, message_to_frame
+from .can_trouble import bus_off_frames
 from .gripper import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, ILLEGAL_VALUE, GripperModel
 
 SERIAL_BROADCAST: Final = eg2_serial.BROADCAST
@@ -104,6 +109,7 @@ class _Server(Running):
         self._thread: threading.Thread | None = None
         self._heap: list[tuple[float, int, Any]] = []
         self._seq = itertools.count()
+        self._muted: set[int] = set()  # IDs that hear nothing (scripted trouble)
 
     # -- models -----------------------------------------------------------------------------
 
@@ -128,9 +134,25 @@ class _Server(Running):
         with self.lock:
             self.model(device).place_object(width, self.clock())
 
+    def place_jam(self, device: int, at: float | None) -> None:
+        with self.lock:
+            self.model(device).place_jam(at, self.clock())
+
     def inject_fault(self, device: int, kind: str, permanent: bool = False) -> None:
         with self.lock:
             self.model(device).inject_fault(kind, self.clock(), permanent)
+
+    def mute(self, device: int, muted: bool) -> None:
+        """The gripper hears nothing (neither acts nor answers) until unmuted."""
+        with self.lock:
+            if muted:
+                self._muted.add(device)
+            else:
+                self._muted.discard(device)
+
+    def bus_off(self, off_s: float) -> None:
+        """Only a CAN bus goes bus-off."""
+        raise NotImplementedError(f"{self.name}: only a CAN bus goes bus-off")
 
     def snapshot(self, device: int) -> dict[str, Any]:
         with self.lock:
@@ -139,10 +161,11 @@ class _Server(Running):
             return m.snapshot()
 
     def _targets(self, device: int, broadcast: int, now: float) -> list[GripperModel]:
-        """The grippers a request to device reaches (awake ones only)."""
+        """The grippers a request to device reaches (awake and listening ones only)."""
+        awake = [m for m in self._models if not m.busy(now) and m.device_id not in self._muted]
         if device == broadcast:
-            return [m for m in self._models if not m.busy(now)]
-        return [m for m in self._models if m.device_id == device and not m.busy(now)]
+            return awake
+        return [m for m in awake if m.device_id == device]
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -203,8 +226,11 @@ class _Server(Running):
 
     def _send_due(self) -> None:
         now = self.clock()
-        while self._heap and self._heap[0][0] <= now:
-            _, _, payload = heapq.heappop(self._heap)
+        while True:
+            with self.lock:  # scripted trouble is scheduled from another thread
+                if not self._heap or self._heap[0][0] > now:
+                    return
+                _, _, payload = heapq.heappop(self._heap)
             self._emit(payload)
 
     def _respond(self, model: GripperModel, now: float, frame: Any) -> None:
@@ -566,6 +592,7 @@ class CanGripperServer(_Server):
         self._own_bus = bus is None
         self._dec = Eg2CanDecoder("sim")
         self._index = 0
+        self._off_bus = False  # bus-off: the grippers neither hear nor answer
         for m in self._models:
             m.id_max = CAN_MAX_ID  # CAN device IDs go to 16382
 
@@ -611,7 +638,20 @@ class CanGripperServer(_Server):
                 return
             self._handle(rec, now)
 
+    def bus_off(self, off_s: float) -> None:
+        """The grippers' node goes bus-off: the error frames of the ramp (``can_trouble``), then
+        for ``off_s`` it hears and answers nothing, then the restart."""
+        frames = bus_off_frames(off_s)
+        restart = len(frames) - 2  # the restart frame ends the silence
+        with self.lock:
+            now = self.clock()
+            for i, (delay, frame) in enumerate(frames):
+                self._schedule(now + delay, _Trouble(frame, off_bus=i < restart))
+
     def _handle(self, rec: Record, now: float) -> None:
+        if self._off_bus:
+            self.stats.ignored += 1
+            return
         device = rec.device if rec.device is not None else -1
         op = rec.code
         address = int(rec.fields.get("address", -1))
@@ -660,7 +700,10 @@ class CanGripperServer(_Server):
         if bus is None:
             return
         frames: list[CanFrame]
-        if isinstance(payload, tuple):
+        if isinstance(payload, _Trouble):
+            self._off_bus = payload.off_bus
+            frames = [payload.frame]
+        elif isinstance(payload, tuple):
             error = CanFrame(None, 0x008, bytes(8), is_error=True)  # protocol violation
             frames = [error, payload[1]]
         else:
@@ -670,3 +713,11 @@ class CanGripperServer(_Server):
                 bus.send(frame_to_message(frame))
             except can.CanError:
                 pass
+
+
+@dataclass(frozen=True, slots=True)
+class _Trouble:
+    """One error frame of a bus-off episode; ``off_bus``: the grippers are off the bus after it."""
+
+    frame: CanFrame
+    off_bus: bool

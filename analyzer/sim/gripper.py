@@ -11,6 +11,7 @@ The behaviour follows the reference (``protocol/EG2-4XX.md``):
   covers the full stroke in ``FULL_STROKE_S`` (0.7 s), speed 1 a thousand times slower;
 - an object between the jaws (``place_object``) stops a closing motion at its width; the force
   then rises to the force limit and the state becomes 6 (stopped by the force limit);
+- an obstruction (``place_jam``) stalls a closing jaw where it meets it: fault bit 0 (stall);
 - continuous catch (CMD 0x18, or catch mode 1 for Modbus/CAN moves) closes again when the grip
   is lost (the object slips or shrinks); a single catch just stops;
 - the driver warms while moving and holding and cools toward ambient; above 80 °C the
@@ -121,8 +122,10 @@ class GripperModel:
         heat_holding_c: float = 25.0,
         speed: int = 500,
         force: int = 100,
+        pace: float = 1.0,
     ) -> None:
         self.device_id = device_id
+        self.pace = pace  # the jaw moves and squeezes this many times faster (demos, tests)
         self.id_max = 254  # serial and Modbus IDs are 1-254; CAN IDs 1-16382
         self.baud = 0
         self.catch_mode = 0
@@ -134,6 +137,7 @@ class GripperModel:
         self.opening = float(opening)
         self.target = self.opening
         self.object_width = object_width
+        self.jam_at: float | None = None  # an obstruction the closing jaw stalls on
         self.ambient_c = ambient_c
         self.temperature = ambient_c if temperature_c is None else temperature_c
         self.thermal_tau_s = thermal_tau_s
@@ -218,6 +222,7 @@ class GripperModel:
             "max_opening": self.max_opening,
             "min_opening": self.min_opening,
             "object_width": self.object_width,
+            "jam_at": self.jam_at,
         }
 
     # -- test and demo knobs ----------------------------------------------------------------
@@ -237,6 +242,13 @@ class GripperModel:
             else:
                 self._activity = _IDLE
                 self._state = STOPPED
+
+    def place_jam(self, at: float | None, now: float | None = None) -> None:
+        """Put an obstruction at this opening (0-1000), or None to take it away: a closing jaw
+        that meets it stalls there (fault bit 0, the jaw stops)."""
+        if now is not None:
+            self.step(now)
+        self.jam_at = at
 
     def inject_fault(self, kind: str, now: float | None = None, permanent: bool = False) -> None:
         """Raise a fault: "stall", "over_temperature" (heats the driver to 85 °C; it clears
@@ -279,16 +291,19 @@ class GripperModel:
 
     def _rate(self) -> float:
         """Opening units per second at the current speed setting."""
-        return max(1, self.speed) * (1000.0 / FULL_STROKE_S) / 1000.0
+        return max(1, self.speed) * (1000.0 / FULL_STROKE_S) / 1000.0 * self.pace
 
     def _advance(self, dt: float) -> None:
         activity = self._activity
         if activity == _CLOSING:
             new = self.opening - self._rate() * dt
-            width = self.object_width
+            width, jam = self.object_width, self.jam_at
             if width is not None and self.target < width <= self.opening + 1e-9 and new <= width:
                 self.opening = float(width)
                 self._activity = _SQUEEZING
+            elif jam is not None and self.target < jam <= self.opening + 1e-9 and new <= jam:
+                self.opening = float(jam)
+                self._raise(FAULT_STALL)
             elif new <= self.target:
                 self.opening = self.target
                 self._halt(FULLY_CLOSED if self.target <= self.min_opening else STOPPED)
@@ -302,7 +317,7 @@ class GripperModel:
             else:
                 self.opening = new
         elif activity == _SQUEEZING:
-            self._force = min(float(self.force), self._force + FORCE_RATE_G_S * dt)
+            self._force = min(float(self.force), self._force + FORCE_RATE_G_S * self.pace * dt)
             if self._force >= self.force:
                 self._activity = _HOLDING
                 self._state = GRIPPING

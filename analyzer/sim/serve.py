@@ -1,24 +1,29 @@
 """``eg2scope sim``'s run: simulated grippers served on a virtual multi-drop serial line (ptys)
 or a python-can bus until Ctrl-C or SIGTERM, where to connect printed, and what was served
-printed at the end."""
+printed at the end. With a scenario the built-in host plays it on the first gripper (``play``),
+over and over, its truth written as JSON lines to the truth file."""
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import signal
 import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
+from ..outfile import output_stream
 from .endpoints import CanGripperServer, ModbusGripperServer, SerialGripperServer
 from .gripper import GripperModel
 from .host import HostQuirks, run_host_cycle
+from .play import TruthLog, play_scenario
 from .ptybus import PtyBus
+from .scenarios import Scenario
 
 MODELS = {
     "serial": "EG2-4X1, regular serial protocol (EB 90 / EE 16 frames), 115200 8N1",
@@ -34,7 +39,9 @@ class SimOptions:
     ``noise``: the probability of each kind of line trouble per response, with its ``seed``;
     ``link``: the host's stable symlink of a serial line (None: in the temporary folder);
     ``host_cycle``: run the scripted host too (``short_registers``: as xArm sends Modbus
-    registers); ``interface``, ``channel``, ``bitrate``: the CAN bus, as python-can names it."""
+    registers); ``interface``, ``channel``, ``bitrate``: the CAN bus, as python-can names it;
+    ``scenario``: play it with the built-in host on the first ID instead (None: none), its
+    truth to the file ``truth`` ("-": stdout; None: nowhere); ``pace``: the jaw's speed-up."""
 
     protocol: str
     ids: tuple[int, ...]
@@ -47,12 +54,17 @@ class SimOptions:
     interface: str
     channel: str
     bitrate: int | None
+    scenario: Scenario | None = None
+    truth: str | None = None
+    pace: float = 1.0
 
 
 def serve(opts: SimOptions) -> int:
     """Serve the grippers until stopped (a stop is how it ends: exit 0)."""
     models = {
-        device: GripperModel(device, now=time.monotonic(), object_width=opts.object_width)
+        device: GripperModel(
+            device, now=time.monotonic(), object_width=opts.object_width, pace=opts.pace
+        )
         for device in opts.ids
     }
     stop = threading.Event()
@@ -85,8 +97,9 @@ def _serve(
         else:
             host_target = _start_serial(opts, models, stack, servers)
         stack.callback(stop.set)
-        if opts.host_cycle:
-            stack.enter_context(_host_thread(opts, host_target, stop))
+        if opts.host_cycle or opts.scenario is not None:
+            truth = TruthLog(None if opts.truth is None else _truth_file(opts.truth, stack))
+            stack.enter_context(_host_thread(opts, host_target, stop, servers[0], truth))
         _wait(stop)
         print("\nstopping ...", file=sys.stderr)
 
@@ -140,6 +153,8 @@ def _describe(opts: SimOptions) -> str:
     ids, width = opts.ids, opts.object_width
     noun = "gripper" if len(ids) == 1 else "grippers"
     what = "no object" if width is None else f"object at {width:g} ({width * 0.07:.1f} mm)"
+    if opts.scenario is not None:
+        what = f"scenario {opts.scenario.name}: {opts.scenario.summary}"
     noise = f", noise {opts.noise:g}" if opts.noise else ""
     return (
         f"eg2scope sim: {len(ids)} simulated {noun} {MODELS[opts.protocol]}\n"
@@ -152,8 +167,7 @@ def _print_serial(opts: SimOptions, host: str, host_link: str, tap: str, tap_lin
     print(f"  host program: open {host}  (stable link: {host_link})")
     print(f"  sniffer:      open {tap}  (stable link: {tap_link})")
     print(f"  e.g. python -c \"import serial; s = serial.Serial('{host_link}', 115200)\"")
-    if opts.host_cycle:
-        print("  the built-in host program is running pick-and-place cycles on the host drop")
+    _print_host(opts, "on the host drop")
     print("Ctrl-C stops.", flush=True)
 
 
@@ -167,17 +181,31 @@ def _print_can(opts: SimOptions) -> None:
             "  note: python-can's virtual bus does not cross processes; for another program "
             "use a vcan device: -i socketcan -c vcan0"
         )
-    if opts.host_cycle:
-        print("  the built-in host program is running pick-and-place cycles on the bus")
+    _print_host(opts, "on the bus")
     print("Ctrl-C stops.", flush=True)
+
+
+def _print_host(opts: SimOptions, where: str) -> None:
+    if opts.scenario is not None:
+        print(
+            f"  the built-in host program is playing scenario {opts.scenario.name!r} on "
+            f"gripper {opts.ids[0]} {where}"
+        )
+    elif opts.host_cycle:
+        print(f"  the built-in host program is running pick-and-place cycles {where}")
+
+
+def _truth_file(path: str, stack: contextlib.ExitStack) -> Any:
+    """The truth's stream: stdout for "-", else a file complete when the simulator stops."""
+    return stack.enter_context(output_stream(path, False))
 
 
 @contextlib.contextmanager
 def _host_thread(
-    opts: SimOptions, target: str | None, stop: threading.Event
+    opts: SimOptions, target: str | None, stop: threading.Event, server: Any, truth: TruthLog
 ) -> Iterator[threading.Thread]:
     """The scripted host on the host's drop (``target``) or, for CAN (None), on a handle of
-    its own on the same bus."""
+    its own on the same bus; the scenario's player when there is one (``server``: its world)."""
     quirks = HostQuirks(short_registers=opts.short_registers)
     bus = None
     if target is None:
@@ -187,12 +215,28 @@ def _host_thread(
         if opts.bitrate:
             kwargs["bitrate"] = opts.bitrate
         bus = can.Bus(interface=opts.interface, channel=opts.channel, **kwargs)
-    thread = threading.Thread(
-        target=run_host_cycle,
-        args=(opts.protocol, target if bus is None else bus, list(opts.ids), None, stop, quirks),
-        name="sim-host",
-        daemon=True,
-    )
+    port_or_bus = target if bus is None else bus
+    run: Callable[[], object]
+    if opts.scenario is not None:
+        run = functools.partial(
+            play_scenario,
+            opts.scenario,
+            opts.protocol,
+            opts.protocol,
+            port_or_bus,
+            server,
+            opts.ids[0],
+            stop,
+            truth,
+            quirks=quirks,
+            pace=opts.pace,
+            repeat=True,  # a sniffer started later still sees whole cycles
+        )
+    else:
+        run = functools.partial(
+            run_host_cycle, opts.protocol, port_or_bus, list(opts.ids), None, stop, quirks
+        )
+    thread = threading.Thread(target=run, name="sim-host", daemon=True)
     thread.start()
     try:
         yield thread

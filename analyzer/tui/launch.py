@@ -73,7 +73,7 @@ def run_tui(opts: TuiOptions) -> int:
 def session_plan(opts: TuiOptions, stack: ExitStack, notes: Notes) -> SessionPlan:
     """The plan of the session the options ask for (``stack`` holds what it opens)."""
     if opts.demo is not None:
-        rig = stack.enter_context(DemoRig(opts.demo.buses, noise=opts.demo.noise))
+        rig = stack.enter_context(DemoRig.of(opts.demo))
         extra = extra_listeners(opts, live=True, notes=notes)
         return live_plan(opts, rig.taps, rig.protocols, rig.run_hosts, extra)
     if opts.capture is not None:
