@@ -1,7 +1,8 @@
 """Where cycles go: text for people, JSONL, CSV and Parquet (docs/contracts.md, "Grip cycles").
 
 Each output takes the cycles as they end (``write``), and is flushed on the session's ticks and
-closed at its end. Parquet is made in ``parquet.py`` (pyarrow is imported only there).
+closed at its end. Parquet's is in ``parquet.py`` (pyarrow is imported only there); the run
+chooses one by its format (``run.make_output``).
 """
 
 from __future__ import annotations
@@ -114,18 +115,3 @@ def details(c: Cycle) -> list[str]:
         words.append("not read: " + ", ".join(c.unknown))
     words.append(f"frames {c.start_seq}-{c.end_seq}")
     return words
-
-
-def make_output(fmt: str, out: IO[Any]) -> CycleOutput:
-    """The output of ``fmt`` on an open stream (binary for jsonl and parquet)."""
-    if fmt == "jsonl":
-        return JsonlCycles(out)
-    if fmt == "csv":
-        return CsvCycles(out)
-    if fmt == "parquet":
-        from .parquet import ParquetCycles  # pyarrow: only when asked for
-
-        return ParquetCycles(out)
-    if fmt == "text":
-        return TextCycles(out)
-    raise ValueError(f"unknown cycles format {fmt!r}; choose one of {', '.join(FORMATS)}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass
+from typing import IO, Any
 
 from ..errors import UsageError
 from ..live_runner import LiveOptions, run_demo, run_session
@@ -20,7 +21,7 @@ from ..session.capture import (
 from ..sim.rig import DemoOptions
 from ..sources.tap_options import TapOptions, make_taps
 from .listener import CyclesListener
-from .outputs import BINARY, make_output
+from .outputs import BINARY, FORMATS, CsvCycles, CycleOutput, JsonlCycles, TextCycles
 
 
 @dataclass(frozen=True)
@@ -86,3 +87,18 @@ def live_cycles(opts: CyclesOptions) -> int:
             return run_demo("cycles", opts.demo, opts.live, show=None, extra=[listener])
         assert taps is not None
         return run_session(opts.live, taps, show=None, extra=[listener])
+
+
+def make_output(fmt: str, out: IO[Any]) -> CycleOutput:
+    """The output of ``fmt`` on an open stream (binary for jsonl and parquet)."""
+    if fmt == "jsonl":
+        return JsonlCycles(out)
+    if fmt == "csv":
+        return CsvCycles(out)
+    if fmt == "parquet":
+        from .parquet import ParquetCycles  # pyarrow: only when asked for
+
+        return ParquetCycles(out)
+    if fmt == "text":
+        return TextCycles(out)
+    raise ValueError(f"unknown cycles format {fmt!r}; choose one of {', '.join(FORMATS)}")
