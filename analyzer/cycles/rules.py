@@ -102,6 +102,7 @@ class Watch:
     aim: str
     target: int  # the opening aimed at, 0-1000
     before: Context
+    reach: tuple[float, float] = (1.0, 0.0)  # openings that reach the target (none: lo > hi)
     copies: list[int] = field(default_factory=list)
     accepted: int = 0  # copies answered with no refusal
     answered: int = 0  # copies answered at all
@@ -202,13 +203,8 @@ class Watch:
             self.slip = Mark(seq, t)
         if self.final_pending:
             self.final_opening, self.final_pending = opening, False
-        if self.at_target is None and self._reached(opening):
+        if self.at_target is None and self.reach[0] <= opening <= self.reach[1]:
             self.at_target = Mark(seq, t)
-
-    def _reached(self, opening: int) -> bool:
-        if self.aim == OPEN:
-            return opening >= self.before.max_opening - AT_TARGET
-        return self.aim == GO_TO and abs(opening - self.target) <= AT_TARGET
 
     def _state(self, seq: int, t: float | None, state: int, opening: int | None) -> None:
         self.seen.add(STATE)
@@ -367,6 +363,16 @@ def watch(cmd: Command, device: int, ctx: Context) -> Watch:
     before = Context(
         ctx.state, ctx.opening, ctx.force_setting, ctx.max_opening, ctx.min_opening, ctx.state_read
     )
-    w = Watch(cmd, device, aim, target, before)
+    w = Watch(cmd, device, aim, target, before, _reach(aim, target, ctx))
     w.copy(cmd)
     return w
+
+
+def _reach(aim: str, target: int, ctx: Context) -> tuple[float, float]:
+    """The openings that show a command reached its end where no state is read: the upper
+    limit after an open, the target of a move (a close: none, the opening never proves it)."""
+    if aim == OPEN:
+        return ctx.max_opening - AT_TARGET, float("inf")
+    if aim == GO_TO:
+        return target - AT_TARGET, target + AT_TARGET
+    return 1.0, 0.0

@@ -113,42 +113,34 @@ class Segmenter:
 
     def _run(self, key: tuple[str, int], events: list[Event]) -> None:
         gripper = self._gripper(key)
-        reading = self._reading
+        ctx = gripper.context
         for event in events:
-            if event[1] == READING:
-                values, holder = event[3], event[4]
-                w = gripper.watch
-                if values == holder[0] and (w is None or w.final is not None):
-                    continue  # the same again: nothing new for a cycle already decided
-                holder[0] = values
-                reading(gripper, event[0], event[2], values)
-            elif type(event[3]) is Command:
-                self._command(gripper, event[3])
-            else:
-                self._answer(gripper, event[3])
+            if event[1] != READING:
+                if type(event[3]) is Command:
+                    self._command(gripper, event[3])
+                else:
+                    self._answer(gripper, event[3])
+                continue
+            values, holder = event[3], event[4]
+            w = gripper.watch
+            if values == holder[0] and (w is None or w.final is not None):
+                continue  # the same again: nothing new for a cycle already decided
+            holder[0] = values
+            state, opening, force, fault, force_setting, max_opening, min_opening = values
+            if force_setting is not None or max_opening is not None or min_opening is not None:
+                _settings(ctx, force_setting, max_opening, min_opening)
+            if state is None and opening is None and force is None and fault is None:
+                continue  # a setting: no reading
+            gripper.heard = True
+            if w is not None:
+                w.reading(event[0], event[2], state, opening, force, fault, ctx.force_setting)
+            if state is not None:
+                ctx.state, ctx.state_read = state, True
+            if opening is not None:
+                ctx.opening = opening
         w = gripper.watch
         if w is not None and events:
             w.end = Mark(events[-1][0], events[-1][2])
-
-    def _reading(self, gripper: Gripper, seq: int, t: float | None, values: Event) -> None:
-        state, opening, force, fault, force_setting, max_opening, min_opening = values
-        ctx = gripper.context
-        if force_setting is not None:
-            ctx.force_setting = force_setting
-        if max_opening is not None:
-            ctx.max_opening = max_opening
-        if min_opening is not None:
-            ctx.min_opening = min_opening
-        if state is None and opening is None and force is None and fault is None:
-            return  # a setting: no reading
-        gripper.heard = True
-        w = gripper.watch
-        if w is not None:
-            w.reading(seq, t, state, opening, force, fault, ctx.force_setting)
-        if state is not None:
-            ctx.state, ctx.state_read = state, True
-        if opening is not None:
-            ctx.opening = opening
 
     def _command(self, gripper: Gripper, cmd: Command) -> None:
         """A command to this gripper, or a broadcast one (to a gripper heard so far)."""
@@ -180,3 +172,15 @@ class Segmenter:
         if w is not None:
             self.cycles.append(w.cycle(ended_at))
             gripper.watch = None
+
+
+def _settings(
+    ctx: Context, force_setting: int | None, max_opening: int | None, min_opening: int | None
+) -> None:
+    """A gripper's settings, as a frame set or read them."""
+    if force_setting is not None:
+        ctx.force_setting = force_setting
+    if max_opening is not None:
+        ctx.max_opening = max_opening
+    if min_opening is not None:
+        ctx.min_opening = min_opening
