@@ -23,8 +23,8 @@ in this order:
 
 Contact is the first reading of state 6, or of a measured force at half the force setting or
 more, while closing; the width is the opening read with it (or the first read after it: the
-jaws stand on the part). ``slip``: an opening more than ``SLIP_MARGIN`` below that width afterwards,
-or the state leaving 6 while the cycle holds.
+jaws stand on the part). ``slip``: an opening more than ``SLIP_MARGIN`` below that width
+afterwards, or the state leaving 6 while the cycle holds.
 """
 
 from __future__ import annotations
@@ -58,12 +58,10 @@ AT_TARGET: Final = 10  # of 1000 (0.7 mm): an opening this close to the target h
 SLIP_MARGIN: Final = 10  # of 1000: an opening this far below the width at contact is a slip
 CONTACT_FORCE: Final = 0.5  # of the force setting: a measured force this high is contact
 
-# run states (docs/protocol.md, section 1.3)
+# run states (docs/protocol.md, section 1.3): standing still; 4 and 5 are moving
 FULLY_OPEN: Final = 1
 FULLY_CLOSED: Final = 2
 STOPPED_IDLE: Final = 3
-CLOSING: Final = 4
-OPENING_STATE: Final = 5
 GRIPPING: Final = 6
 STANDING: Final = frozenset({FULLY_OPEN, FULLY_CLOSED, STOPPED_IDLE, GRIPPING})
 
