@@ -42,6 +42,7 @@ QUANTITIES: Final = (STATE, OPENING, FORCE, TIME)
 
 # warnings
 SLIP: Final = "slip"
+NOT_ANSWERED: Final = "unanswered"  # never answered, yet the readings show it carried out
 
 
 @dataclass(slots=True)

@@ -6,8 +6,9 @@ in this order:
 
 1. ``faulted``: a reading showed fault bits;
 2. ``refused``: every copy of the command was answered with a refusal (serial ``55``, a Modbus
-   exception); ``unanswered``: none was answered; ``unfinished``: the capture was stopped before
-   an answer could come;
+   exception); ``unanswered``: none was answered and no reading showed the gripper carry it out
+   (where one did, the rules below decide, with the warning ``unanswered``); ``unfinished``: the
+   capture was stopped before an answer could come;
 3. ``stopped``: a stop command came before a reading showed the motion finished;
 4. the first state the gripper reported standing still that fits the command: 6 ``gripped``,
    2 ``closed_empty``, 1 ``opened``, 3 ``positioned`` at the target of a move (within
@@ -40,6 +41,7 @@ from .model import (
     FAULTED,
     FORCE,
     GRIPPED,
+    NOT_ANSWERED,
     OPENED,
     OPENING,
     POSITIONED,
@@ -148,8 +150,10 @@ class Watch:
 
     def accepts_retry(self, cmd: Command) -> bool:
         """Whether ``cmd`` is this command sent again (not a new cycle): the same bytes, as a
-        retransmission, or after no copy was accepted yet."""
-        return cmd.same == self.command.same and (cmd.retransmission or self.accepted <= 0)
+        retransmission, after no copy was accepted yet, or before any reading came."""
+        if cmd.same != self.command.same:
+            return False
+        return cmd.retransmission or self.accepted <= 0 or not self.seen
 
     def stopped(self, seq: int, t: float | None) -> Mark:
         """A stop command: the cycle ends here."""
@@ -280,7 +284,7 @@ class Watch:
             settle_ms=self._ms(self._settled(outcome)),
             retries=len(self.copies) - 1,
             faults=fault_text(self.faults),
-            warnings=[SLIP] if self.slip is not None and self.contact is not None else [],
+            warnings=self._warnings(outcome),
             unknown=self._unknown(),
             evidence=sorted(set(evidence)),
         )
@@ -291,7 +295,7 @@ class Watch:
             return FAULTED, [*asked, self.fault_mark.seq]
         if self.accepted <= 0 and self.refusals:
             return REFUSED, asked
-        if self.answered == 0:
+        if self.answered == 0 and (self.cut_off or not self._carried_out()):
             return (UNFINISHED if self.cut_off else UNANSWERED), asked
         if self.stop is not None and self.final is None:
             return STOPPED, [*asked, self.stop.seq]
@@ -304,6 +308,18 @@ class Watch:
         if ended_by_capture and self.before.state_read and not self.seen:
             return UNFINISHED, asked
         return UNKNOWN, asked
+
+    def _carried_out(self) -> bool:
+        """Whether a reading showed the gripper carry the command out (an answer lost on the
+        way, or missed by the tap, does not make a grip that happened unanswered): moving, or
+        standing at an end that fits it."""
+        return self.moved or self.final is not None
+
+    def _warnings(self, outcome: str) -> list[str]:
+        found = [SLIP] if self.slip is not None and self.contact is not None else []
+        if self.answered == 0 and outcome not in (UNANSWERED, UNFINISHED):
+            found.append(NOT_ANSWERED)
+        return found
 
     def _standing(self) -> str:
         state = self.final_state

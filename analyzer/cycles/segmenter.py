@@ -2,8 +2,9 @@
 
 A cycle starts at a motion command to a gripper (a broadcast one starts a cycle on every gripper
 of its bus heard so far) and ends at the next motion command to it, at a stop (which the cycle
-keeps), or at the end of the capture. A command sent again (a retransmission, or a copy after
-the first went unanswered or was refused) is a retry of the cycle, not a new one. Readings come
+keeps), or at the end of the capture. A command sent again (a retransmission, a copy after
+the first went unanswered or was refused, or one before any reading came) is a retry of the
+cycle, not a new one. Readings come
 from the Tracker's state samples, so every protocol's frames mean here what they mean in the
 device state (``analyzer/session/tracker.py``).
 

@@ -181,6 +181,39 @@ def test_unanswered(script: Script, case: tuple[str, str]) -> None:
     assert cycle.outcome == "unanswered" and cycle.evidence == [start]
 
 
+def test_unanswered_yet_carried_out_says_what_happened(
+    script: Script, case: tuple[str, str]
+) -> None:
+    """The answer was lost (or the tap missed it), but the readings show the grip: the cycle
+    says what happened, and warns that the command was never answered."""
+    at_rest(script)
+    script.catch(answer="none")
+    script.poll(state=4, opening=700, force=0)
+    script.poll(state=6, opening=420, force=100)
+    cycle = only(run(script, case))
+    assert (cycle.outcome, cycle.warnings) == ("gripped", ["unanswered"])
+
+
+def test_unanswered_and_nothing_moved_is_unanswered(script: Script, case: tuple[str, str]) -> None:
+    at_rest(script)
+    start = script.catch(answer="none")
+    for _ in range(3):
+        script.poll(state=1, opening=1000, force=0)  # still open: it never got the command
+    cycle = only(run(script, case))
+    assert (cycle.outcome, cycle.warnings, cycle.evidence) == ("unanswered", [], [start])
+
+
+def test_the_same_command_again_before_any_reading_is_a_retry(
+    script: Script, case: tuple[str, str]
+) -> None:
+    at_rest(script)
+    first = script.catch()
+    script.catch()
+    script.poll(state=6, opening=420, force=100)
+    cycle = only(run(script, case))
+    assert (cycle.outcome, cycle.retries, cycle.start_seq) == ("gripped", 1, first)
+
+
 @pytest.mark.parametrize("wait_s", [0.03, 0.6], ids=["retransmission", "after-unanswered"])
 def test_resent_and_answered_is_one_cycle(
     script: Script, case: tuple[str, str], wait_s: float
