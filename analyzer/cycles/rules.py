@@ -18,9 +18,9 @@ in this order:
 5. where the host reads no state in the cycle: the opening alone, where it proves the outcome
    (a move at its target: ``positioned``; an opening at the open limit after a release or an
    open move: ``opened``);
-6. ``unfinished``: the readings showed the gripper still moving, or the capture ended before
-   any reading while the host had been reading the state; else ``unknown``, and ``unknown``
-   names what the host never read in the cycle.
+6. ``unfinished``: the readings showed the gripper still moving, or the capture ended before a
+   reading of the state came from a host that had been reading it; else ``unknown``, and
+   ``unknown`` names what the host never read in the cycle.
 
 Contact is the first reading of state 6, or of a measured force at half the force setting or
 more, while closing; the width is the opening read with it (or the first read after it: the
@@ -305,8 +305,8 @@ class Watch:
             return (OPENED if self.aim == OPEN else POSITIONED), [*asked, self.at_target.seq]
         if STATE in self.seen and self.last_state is not None:
             return UNFINISHED, [*asked, self.last_state]
-        if ended_by_capture and self.before.state_read and not self.seen:
-            return UNFINISHED, asked
+        if ended_by_capture and self.before.state_read:
+            return UNFINISHED, asked  # the capture ended before the next reading of the state
         return UNKNOWN, asked
 
     def _carried_out(self) -> bool:

@@ -262,11 +262,14 @@ def test_unfinished_when_the_next_command_comes_first(
     assert second.start_seq == release
 
 
+@pytest.mark.parametrize("opening", [None, 700])
 def test_the_capture_ends_before_a_reading_of_a_host_that_reads_state(
-    script: Script, case: tuple[str, str]
+    script: Script, case: tuple[str, str], opening: int | None
 ) -> None:
     at_rest(script)
     script.catch()
+    if opening is not None:
+        script.poll(opening=opening)  # the state's poll would have come next
     assert only(run(script, case)).outcome == "unfinished"
 
 
