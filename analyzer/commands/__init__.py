@@ -9,6 +9,7 @@ from __future__ import annotations
 SUBCOMMANDS: tuple[str, ...] = (
     "decode",
     "stats",
+    "cycles",
     "live",
     "record",
     "bridge",

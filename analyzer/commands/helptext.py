@@ -13,7 +13,7 @@ EXIT_STATUS: Final = (
     "exit status: 0 done (a live capture stopped with Ctrl-C, SIGTERM or SIGHUP is done: "
     "its recording is finished); 1 error (a file that cannot be read or written, a live "
     "source that never opened, a device that failed); 2 usage error; 3 decoded as far as "
-    "possible, but the input is damaged; 130 a file job (decode, stats, batch, plot or tui "
+    "possible, but the input is damaged; 130 a file job (decode, stats, batch, plot, tui or cycles "
     "of a capture) interrupted before the end of its input"
 )
 #: a capture file's job: decode, stats

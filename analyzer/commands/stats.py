@@ -12,6 +12,8 @@ from rich.table import Table
 
 from decoders.flags import DESCRIPTIONS
 
+from ..cycles.listener import CyclesListener
+from ..cycles.summary import CycleSummary
 from ..session.capture import finish_capture, run_capture
 from ..sinks.stats import StatsListener
 from ..stats import COUNT_NAMES
@@ -26,7 +28,9 @@ def add_subparser(sub: Any) -> None:
         description=(
             "Summarise a capture: frames per device and per command, unanswered requests, "
             "errors (checksum, CRC, garbage, truncation), response latency p50/p95/max, the "
-            "warnings raised by the manual's rules, and notable patterns such as ID scans."
+            "warnings raised by the manual's rules, notable patterns such as ID scans, and per "
+            "gripper its grip cycles: their outcomes and the percentiles of their times (see "
+            "'eg2scope cycles')."
         ),
         epilog=FILE_EXIT_STATUS,
         formatter_class=HelpFormatter,
@@ -49,9 +53,11 @@ def _ms(x: float | None) -> str:
 def run(args: argparse.Namespace) -> int:
     opts = capture_options(args)
     listener = StatsListener()
-    session, reader = run_capture(opts, [listener])
+    cycles = CycleSummary()  # of every record: --device picks the grippers, below
+    session, reader = run_capture(opts, [listener], whole=[CyclesListener(cycles, opts.device)])
     code = finish_capture(opts.path, session, reader, opts)
     data = listener.stats.as_dict()
+    data["cycles"] = cycles.as_list()
     if args.format == "json":
         sys.stdout.buffer.write(orjson.dumps(data, option=orjson.OPT_INDENT_2) + b"\n")
     else:
@@ -102,3 +108,23 @@ def print_tables(path: str, data: dict[str, Any]) -> None:
             console.print(f"  {n:>8,}  {kind}", markup=False)
     for note in data["notes"]:
         console.print(f"[bold]Note:[/] {note}")
+    if data["cycles"]:
+        console.print(cycles_table(data["cycles"]))
+
+
+def cycles_table(rows: list[dict[str, Any]]) -> Table:
+    """Each gripper's grip cycles: outcomes, cycle time (command to the next), settle time."""
+    table = Table(title="Grip cycles", title_justify="left")
+    for col in ("bus", "device", "outcomes"):
+        table.add_column(col, no_wrap=col != "outcomes")
+    for col in ("cycles", "cycle p50 ms", "p95 ms", "max ms", "settle p50 ms", "p95 ms", "max ms"):
+        table.add_column(col, justify="right")
+    for row in rows:
+        times = (row["duration"][k] for k in ("p50_ms", "p95_ms", "max_ms"))
+        settle = (row["settle"][k] for k in ("p50_ms", "p95_ms", "max_ms"))
+        outcomes = ", ".join(f"{name} {n}" for name, n in row["outcomes"].items())
+        table.add_row(
+            row["bus"], str(row["device"]), outcomes, str(row["cycles"]), *map(_ms, times),
+            *map(_ms, settle),
+        )  # fmt: skip
+    return table

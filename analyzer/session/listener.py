@@ -69,6 +69,7 @@ LISTENERS: dict[str, str] = {
     "stats": "analyzer.sinks.stats:StatsListener",
     "mcap": "analyzer.recording.recorder:McapRecorder",
     "rerun": "analyzer.plot.listener:RerunListener",
+    "cycles": "analyzer.cycles.listener:CyclesListener",
 }
 
 

@@ -247,3 +247,51 @@ def test_every_registered_listener_is_named() -> None:
     text = section(ARCHITECTURE, "The listener contract")
     for name in LISTENERS:
         assert f"`{name}`" in text, name
+
+
+# -- docs/contracts.md's grip cycles against the code ----------------------------------------
+
+
+def test_cycle_keys_are_documented_in_order() -> None:
+    from analyzer.cycles.model import KEYS
+
+    rows = table(section(CONTRACTS, "Grip cycles"))
+    assert [code_in(row[0]) for row in rows] == list(KEYS)
+
+
+def test_every_outcome_is_documented_once() -> None:
+    from analyzer.cycles.model import OUTCOMES
+
+    rows = table(section(CONTRACTS, "Grip cycles"), first=1)
+    assert sorted(code_in(row[0]) for row in rows) == sorted(OUTCOMES)
+
+
+def test_what_a_cycle_may_not_know_is_documented() -> None:
+    from analyzer.cycles.model import QUANTITIES
+
+    rows = table(section(CONTRACTS, "Grip cycles"))
+    unknown = next(row[2] for row in rows if code_in(row[0]) == "unknown")
+    assert all(f"`{q}`" in unknown for q in QUANTITIES)
+
+
+def test_cycles_csv_header_is_documented() -> None:
+    from analyzer.cycles.model import KEYS
+
+    block = re.search(r"```\n(bus,device,.*)\n```", section(CONTRACTS, "Grip cycles"))
+    assert block, "the section shows the CSV header line"
+    assert block.group(1).split(",") == list(KEYS)
+
+
+def test_the_cycle_example_is_what_cycles_writes() -> None:
+    examples = re.findall(r"^\{.*\}$", section(CONTRACTS, "Grip cycles"), re.MULTILINE)
+    assert examples
+    capture = ROOT / "captures" / "can_pick_place.log"
+    out = subprocess.run(
+        [sys.executable, "-m", "analyzer", "cycles", str(capture), "-f", "jsonl"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    ).stdout.splitlines()
+    for example in examples:
+        assert example in out

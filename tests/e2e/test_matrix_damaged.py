@@ -1,7 +1,8 @@
-"""Every input kind cut short (its first 60 % of bytes), through decode on each engine, stats and
-batch: exit 3 where the file itself is damaged (a container or a line cut off), 0 for a raw dump
-(whose cut frame is a record of its own, docs/contracts.md); stderr says what, naming the file
-once; and every record before the damage is decoded as it is in the whole file."""
+"""Every input kind cut short (its first 60 % of bytes), through decode on each engine, stats,
+batch and cycles: exit 3 where the file itself is damaged (a container or a line cut off), 0
+for a raw dump (whose cut frame is a record of its own, docs/contracts.md); stderr says what,
+naming the file once; and every record before the damage is decoded as it is in the whole
+file."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import orjson
 import pyarrow.dataset as ds
 import pytest
 from e2e_checks import Decoded, Prefetch, Ran, eg2scope_runs
@@ -94,3 +96,17 @@ def test_batch_of_a_cut_file(kind: str, cut, tmp_path: Path, capsys) -> None:
     assert main(argv) == damaged_exit(kind), capsys.readouterr().err
     [row] = ds.dataset(out / layout.CAPTURES, partitioning="hive").to_table().to_pylist()
     assert row["damaged"] is (kind not in RAW_DUMPS), row["damage"]
+
+
+@pytest.mark.parametrize("kind", IDS)
+def test_cycles_of_a_cut_file(kind: str, cut, inputs, capsys) -> None:
+    """The cycles before the cut are the whole file's (a recording numbers its records as it
+    reads them, so only the other kinds are compared by seq); those the cut ends end there."""
+    argv = ["cycles", str(cut(kind)), "--format", "jsonl", "--no-progress"]
+    assert main(argv) == damaged_exit(kind), capsys.readouterr().err
+    cut_cycles = [orjson.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert main(["cycles", str(inputs[kind]), "--format", "jsonl", "--no-progress"]) == 0
+    whole = [orjson.loads(line) for line in capsys.readouterr().out.splitlines()]
+    if not kind.endswith("recording"):
+        assert {c["start_seq"] for c in cut_cycles} <= {c["start_seq"] for c in whole}
+    assert len(cut_cycles) <= len(whole)
