@@ -5,7 +5,7 @@ the progress bar, and the exit status a session ends with (docs/contracts.md).""
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -123,6 +123,7 @@ class FilteredListener(Listener):
         self.kept = 0  # records passed on
         self.wants_states = inner.wants_states
         self.wants_raw = inner.wants_raw
+        self.reads_frame_batches = inner.reads_frame_batches
         self.label = getattr(inner, "label", type(inner).__name__)
 
     def on_records(self, records: RecordSequence) -> None:
@@ -191,14 +192,19 @@ class ProgressListener(Listener):
 
 
 def run_capture(
-    opts: CaptureOptions, listeners: list[Listener], reader: CaptureReader | None = None
+    opts: CaptureOptions,
+    listeners: list[Listener],
+    reader: CaptureReader | None = None,
+    whole: Sequence[Listener] = (),
 ) -> tuple[Session, CaptureReader]:
-    """Decode a capture through one session into ``listeners`` (filtered by the options), with
-    a progress bar on a terminal. Returns the finished session and its reader."""
+    """Decode a capture through one session into ``listeners`` (filtered by the options) and
+    ``whole`` (every record: a bus's health is the whole bus's), with a progress bar on a
+    terminal. Returns the finished session and its reader."""
     reader = reader or open_reader(opts)
     keep = opts.record_filter()
     if keep is not None:
         listeners = [FilteredListener(x, keep) for x in listeners]
+    listeners = [*listeners, *whole]
     if opts.progress and opts.speed is None and sys.stderr.isatty():
         listeners = [*listeners, ProgressListener(reader)]
     options = SessionOptions(protocol=byte_protocol(opts), engine=opts.engine)
