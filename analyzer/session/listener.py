@@ -73,6 +73,7 @@ LISTENERS: dict[str, str] = {
     "csv": "analyzer.sinks.csv:CsvListener",
     "parquet": "analyzer.parquet.writer:ParquetListener",
     "stats": "analyzer.sinks.stats:StatsListener",
+    "health": "analyzer.health.listener:HealthListener",
     "mcap": "analyzer.recording.recorder:McapRecorder",
     "rerun": "analyzer.plot.listener:RerunListener",
 }
