@@ -28,7 +28,7 @@ class CanBusHealth:
 
     def figures(self) -> dict[str, Any]:
         load = self.load.figures(self.rate.value)
-        timed = self.load.last_t is not None or self.errors.since is not None
+        timed = self.load.last_t is not None or self.errors.last_t is not None
         return {
             "bus": self.bus,
             "kind": CAN,

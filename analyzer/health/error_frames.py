@@ -25,10 +25,13 @@ class ErrorFrameLog:
         self.periods: list[tuple[float, float, str]] = []
         self.state = ERROR_ACTIVE
         self.since: float | None = None  # when the state began (None: untimed, or from start)
+        self.last_t: float | None = None  # the latest error frame's time
 
     def add(self, t: float | None, error_class: int, data: bytes) -> None:
         report = error_report(error_class, data)
         self.total += 1
+        if t is not None and (self.last_t is None or t > self.last_t):
+            self.last_t = t
         self.counts.update(report.keys)
         if report.tx_errors is not None and report.rx_errors is not None:
             self.tx_errors, self.rx_errors = report.tx_errors, report.rx_errors
@@ -44,10 +47,11 @@ class ErrorFrameLog:
     def figures(self, end: float | None) -> dict[str, Any]:
         """``error_frames`` (every class, 0 where none), ``error_counters`` (None where no frame
         carried them) and ``error_states``: the periods, the last one ``to_end`` when the
-        capture (``end``: its last time on this bus) ended first."""
+        capture ended first (``end``: the bus's last frame's time; its last error frame's when
+        that came later)."""
         states = [{"start": a, "end": b, "state": s, "to_end": False} for a, b, s in self.periods]
         if self.state in PERIOD_STATES and self.since is not None:
-            last = self.since if end is None else max(end, self.since)
+            last = max(t for t in (end, self.last_t, self.since) if t is not None)
             states.append({"start": self.since, "end": last, "state": self.state, "to_end": True})
         counters = None
         if self.tx_errors is not None:

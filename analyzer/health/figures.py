@@ -11,19 +11,13 @@ its mean for both.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, Final
 
 from ..stats import LatencyHistogram
 
 PERCENT_DIGITS: Final = 3  # load figures are rounded to 0.001 %
 MS_DIGITS: Final = 3  # times in milliseconds, to the microsecond
-
-
-def nearest_rank(values: Sequence[float], p: float) -> float:
-    """The ``p``-th percentile of sorted ``values`` by nearest rank (``values`` not empty)."""
-    rank = max(1, math.ceil(p / 100.0 * len(values)))
-    return values[rank - 1]
 
 
 def load_pct(
@@ -38,8 +32,11 @@ def load_pct(
     if stop <= first:
         return _rounded(mean, mean, mean)
     loads = sorted(100.0 * bits / rate for s, bits in seconds.items() if first <= s < stop)
-    loads[:0] = [0.0] * (stop - first - len(loads))  # the seconds without a frame
-    return _rounded(mean, nearest_rank(loads, 95), loads[-1])
+    silent = stop - first - len(loads)  # seconds without a frame, at 0 % (never listed: a
+    # clock that jumps a year would make a list of every second in between)
+    rank = max(1, math.ceil(0.95 * (stop - first)))  # p95 by nearest rank
+    p95 = 0.0 if rank <= silent else loads[rank - silent - 1]
+    return _rounded(mean, p95, loads[-1] if loads else 0.0)
 
 
 def _rounded(mean: float, p95: float, top: float) -> dict[str, float | None]:

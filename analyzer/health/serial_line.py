@@ -9,6 +9,7 @@ times; frame times from ``line_clock``. A raw dump has no times at all: then onl
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from typing import Any, Final
 
@@ -60,7 +61,7 @@ class SerialLine:
         self.bytes += n
         if t is None or not n:
             return
-        self.seconds[int(t // 1)] += n * LINE_BITS_PER_BYTE
+        self.seconds[math.floor(t)] += n * LINE_BITS_PER_BYTE
         begun = t - n * self.byte_time_s
         if self.first_t is None or begun < self.first_t:
             self.first_t = begun

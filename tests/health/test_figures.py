@@ -5,13 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from analyzer.health.figures import Spread, load_pct, nearest_rank
-
-
-def test_nearest_rank() -> None:
-    values = [float(v) for v in range(1, 21)]
-    assert nearest_rank(values, 95) == 19.0 and nearest_rank(values, 50) == 10.0
-    assert nearest_rank([3.0], 95) == 3.0
+from analyzer.health.figures import Spread, load_pct
 
 
 def test_whole_seconds_only_and_silent_ones_count() -> None:
@@ -39,3 +33,10 @@ def test_spread() -> None:
     assert (got["count"], got["min"], got["max"], got["unmeasured"]) == (5, 1.0, 100.0, 1)
     assert got["median"] == pytest.approx(3.0, rel=0.01)
     assert Spread().summary()["median"] is None
+
+
+def test_a_clock_that_jumps_makes_no_second_of_every_second_between() -> None:
+    # a stamp a year off: 31.5 million silent seconds, counted, not listed
+    seconds = {0: 250_000, 31_536_000: 250_000}
+    got = load_pct(seconds, -0.5, 31_536_000.5, 500_000, 500_000)
+    assert got["p95"] == 0.0 and got["max"] == 50.0
