@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import IO, TYPE_CHECKING, Any
 
+from decoders.framing import LINE_BITS_PER_BYTE
 from decoders.model import Record
 
 from . import __version__
@@ -121,7 +122,7 @@ def byte_times(taps: list[Tap]) -> dict[str, float]:
     for tap in taps:
         baud = tap.settings.get("baudrate")
         if isinstance(baud, int | float) and baud > 0:
-            out[tap.bus] = 10.0 / baud
+            out[tap.bus] = LINE_BITS_PER_BYTE / baud
     return out
 
 

@@ -49,6 +49,7 @@ from typing import Any, Final
 
 from . import flags as F
 from . import messages as M
+from .can_errors import error_class_words
 from .model import EG2_CAN, FOREIGN_CAN, FRAME, REQUEST, RESPONSE, CanFrame, Record
 from .notes import Notes
 from .registers import (
@@ -78,19 +79,6 @@ PENDING_LIMIT: Final = 50_000
 
 _ZERO7: Final = bytes(7)
 
-# SocketCAN error classes (linux/can/error.h), carried in an error frame's identifier
-_CAN_ERR_CLASSES: Final = (
-    (0x001, "TX timeout"),
-    (0x002, "lost arbitration"),
-    (0x004, "controller problem"),
-    (0x008, "protocol violation"),
-    (0x010, "transceiver status"),
-    (0x020, "no ACK on transmission"),
-    (0x040, "bus off"),
-    (0x080, "bus error"),
-    (0x100, "controller restarted"),
-)
-
 # direction tags (part of the memo key)
 _TAG_REQUEST: Final = 0
 _TAG_RESPONSE: Final = 1
@@ -110,7 +98,7 @@ def unpack_id(arbitration_id: int) -> tuple[int, int, int]:
 
 def can_error_text(error_class: int) -> str:
     """An error frame's identifier (SocketCAN error class bits) in words."""
-    words = [text for bit, text in _CAN_ERR_CLASSES if error_class & bit]
+    words = error_class_words(error_class)
     if not words:
         return M.CAN_ERROR_FRAME.text()
     return M.CAN_ERROR_FRAME_CLASSES.text(classes=", ".join(words), error_class=error_class)

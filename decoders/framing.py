@@ -38,6 +38,7 @@ from .model import CUT_OFF, GARBAGE, TRUNCATED, Chunk, Record
 
 NEED_MORE: Final = -0x7FFFFFFF  # frame_at: cannot decide before more bytes arrive
 MAX_GARBAGE: Final = 4096  # a garbage run is cut into records of at most this many bytes
+LINE_BITS_PER_BYTE: Final = 10  # a byte on an 8N1 line: start bit, 8 data bits, stop bit
 
 # one chunk's place and time: (stream offset of its first byte, offset after its last byte,
 # its arrival time, whether a silence longer than gap_s came before it)
@@ -48,7 +49,7 @@ class ByteStreamDecoder:
     """Base of the byte-stream decoders: feed Chunks, get Records in stream order."""
 
     protocol: str = ""
-    gap_s: float = 0.00175  # silence that hints at a frame boundary
+    gap_s: float = 0.00175  # silence that hints at a frame boundary (Modbus RTU's t3.5)
     idle_s: float = 0.1  # a live line quiet this long will not finish the frame it started
 
     def __init__(self, bus: str = "serial", *, byte_time_s: float | None = None) -> None:

@@ -28,10 +28,23 @@ from typing import Any, Final
 import crcmod.predefined
 
 from . import messages as M
-from .framing import NEED_MORE, ByteStreamDecoder
+from .framing import LINE_BITS_PER_BYTE, NEED_MORE, ByteStreamDecoder
 from .model import MODBUS_RTU, RESPONSE
 
 crc16: Final = crcmod.predefined.mkCrcFun("modbus")  # CRC-16/MODBUS (C extension)
+
+# Modbus over serial line (V1.02, 2.5.1.1): frames are apart by at least 3.5 characters of
+# silence; above 19200 baud by a fixed 1.75 ms
+SILENCE_CHARACTERS: Final = 3.5
+FIXED_SILENCE_ABOVE_BAUD: Final = 19200
+FIXED_SILENCE_S: Final = 0.00175
+
+
+def frame_silence_s(baud: int) -> float:
+    """The silence the Modbus RTU standard puts between frames at ``baud`` (t3.5)."""
+    if baud > FIXED_SILENCE_ABOVE_BAUD:
+        return FIXED_SILENCE_S
+    return SILENCE_CHARACTERS * LINE_BITS_PER_BYTE / baud
 
 
 def _raw_crc() -> tuple[Any, Any]:

@@ -29,6 +29,7 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere: the project's mo
 from analyzer.session import tracker  # noqa: E402
 from analyzer.sinks import csv as csv_sink  # noqa: E402
 from decoders import (  # noqa: E402
+    can_errors,
     eg2_can,
     eg2_serial,
     flags,
@@ -361,7 +362,7 @@ def tracker_module() -> list[str]:
 
 
 def can_module() -> list[str]:
-    classes = [f"(0x{bit:03X}, {rs_str(text)})" for bit, text in eg2_can._CAN_ERR_CLASSES]
+    classes = [f"(0x{bit:03X}, {rs_str(text)})" for bit, _, text in can_errors.ERROR_CLASSES]
     body = [
         *array("OPERATIONS", "&str", [rs_str(op) for op in eg2_can.OPERATIONS]),
         *const("OP_READ", "u32", str(eg2_can.OP_READ)),

@@ -37,6 +37,7 @@ CORE_API = (
     "SampleBatch.messages",
     "SampleBatch.series",
     "can_raw_messages",
+    "can_seconds",
 )
 
 

@@ -1,4 +1,5 @@
-"""``eg2scope stats FILE``: per-device and per-command counts, errors, latency, warnings."""
+"""``eg2scope stats FILE``: per-device and per-command counts, errors, latency, warnings, and
+each bus's health."""
 
 from __future__ import annotations
 
@@ -14,21 +15,30 @@ from decoders.flags import DESCRIPTIONS
 
 from ..cycles.listener import CyclesListener
 from ..cycles.summary import CycleSummary
-from ..session.capture import finish_capture, run_capture
+from ..health.listener import HealthListener
+from ..health.rates import rates_of_capture
+from ..health.table import print_health
+from ..session.capture import finish_capture, open_reader, run_capture
 from ..sinks.stats import StatsListener
 from ..stats import COUNT_NAMES
-from .common import add_input_arguments, capture_options
+from .common import add_input_arguments, capture_options, positive_int
 from .helptext import FILE_EXIT_STATUS, HelpFormatter
 
 
 def add_subparser(sub: Any) -> None:
     parser = sub.add_parser(
         "stats",
-        help="summarise a capture: counts, errors, latency, warnings",
+        help="summarise a capture: counts, errors, latency, warnings, bus health",
         description=(
             "Summarise a capture: frames per device and per command, unanswered requests, "
             "errors (checksum, CRC, garbage, truncation), response latency p50/p95/max, the "
-            "warnings raised by the manual's rules, notable patterns such as ID scans, and per "
+            "warnings raised by the manual's rules, and notable patterns such as ID scans. "
+            "Then each bus's health: CAN load from the exact bits of every frame (stuff bits "
+            "included) per second (mean, p95, max), frames/s, error frames by class with "
+            "error-passive and bus-off periods; a serial line's use at its baud (10 bits a "
+            "byte), the gaps between frames, Modbus frames closer than 3.5 characters, each "
+            "gripper's turnaround, and a hint when a USB adapter's latency timer shows in the "
+            "read times. A capture without times (a raw dump) gets counts only. Last, per "
             "gripper its grip cycles: their outcomes and the percentiles of their times (see "
             "'eg2scope cycles')."
         ),
@@ -36,6 +46,20 @@ def add_subparser(sub: Any) -> None:
         formatter_class=HelpFormatter,
     )
     add_input_arguments(parser)
+    parser.add_argument(
+        "--bitrate",
+        type=positive_int,
+        metavar="BPS",
+        help="CAN bit rate for the bus load, every CAN bus (default: the rate a recording "
+        "says its tap ran at, else 500000, the EG2's)",
+    )
+    parser.add_argument(
+        "--baud",
+        type=positive_int,
+        metavar="N",
+        help="serial baud rate for line use, gaps and turnaround, every serial bus (default: "
+        "the rate a recording says its tap ran at, else 115200, the EG2's)",
+    )
     parser.add_argument(
         "--format",
         "-f",
@@ -52,11 +76,15 @@ def _ms(x: float | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     opts = capture_options(args)
+    reader = open_reader(opts)
     listener = StatsListener()
+    health = HealthListener(rates_of_capture(reader.metadata, args.bitrate, args.baud))
     cycles = CycleSummary()  # of every record: --device picks the grippers, below
-    session, reader = run_capture(opts, [listener], whole=[CyclesListener(cycles, opts.device)])
+    whole = [health, CyclesListener(cycles, opts.device)]
+    session, reader = run_capture(opts, [listener], reader, whole=whole)
     code = finish_capture(opts.path, session, reader, opts)
     data = listener.stats.as_dict()
+    data["buses"] = health.buses()
     data["cycles"] = cycles.as_list()
     if args.format == "json":
         sys.stdout.buffer.write(orjson.dumps(data, option=orjson.OPT_INDENT_2) + b"\n")
@@ -79,6 +107,8 @@ def print_tables(path: str, data: dict[str, Any]) -> None:
         ("Devices", data["devices"], None),
         ("Commands", data["commands"], "name"),
     ):
+        if not rows:
+            continue  # an empty capture is said so once, on stderr
         table = Table(title=title, title_justify="left")
         for col in ("bus", "protocol", "device", *([key] if key else [])):
             table.add_column(col, no_wrap=True)
@@ -106,6 +136,7 @@ def print_tables(path: str, data: dict[str, Any]) -> None:
         console.print("[bold]Source events[/]")
         for kind, n in data["events"].items():
             console.print(f"  {n:>8,}  {kind}", markup=False)
+    print_health(console, data["buses"])
     for note in data["notes"]:
         console.print(f"[bold]Note:[/] {note}")
     if data["cycles"]:

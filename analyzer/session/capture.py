@@ -123,6 +123,7 @@ class FilteredListener(Listener):
         self.kept = 0  # records passed on
         self.wants_states = inner.wants_states
         self.wants_raw = inner.wants_raw
+        self.reads_frame_batches = inner.reads_frame_batches
         self.label = getattr(inner, "label", type(inner).__name__)
 
     def on_records(self, records: RecordSequence) -> None:
@@ -197,8 +198,8 @@ def run_capture(
     whole: Sequence[Listener] = (),
 ) -> tuple[Session, CaptureReader]:
     """Decode a capture through one session into ``listeners`` (filtered by the options) and
-    ``whole`` (every record: grip cycles need all of them), with a progress bar on a terminal.
-    Returns the finished session and its reader."""
+    ``whole`` (every record: grip cycles and a bus's health are the whole bus's), with a progress
+    bar on a terminal. Returns the finished session and its reader."""
     reader = reader or open_reader(opts)
     keep = opts.record_filter()
     if keep is not None:

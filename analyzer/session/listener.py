@@ -31,6 +31,11 @@ class Listener(ABC):
     wants_states: bool = False
     #: the session keeps raw input only when some listener reads it
     wants_raw: bool = False
+    #: ``on_raw`` may be handed the native core's ``FrameBatch`` (a candump log read natively:
+    #: CAN frames, no Python object per frame) instead of a list of Items: set by a listener
+    #: that reads raw items only through functions taking both (``health.can_load.can_seconds``),
+    #: so that wanting them does not cost the native read
+    reads_frame_batches: bool = False
 
     @abstractmethod
     def on_records(self, records: RecordSequence) -> None:
@@ -47,7 +52,8 @@ class Listener(ABC):
         records around it."""
 
     def on_raw(self, items: list[Item]) -> None:
-        """The raw input of the records that follow: byte chunks and CAN frames."""
+        """The raw input of the records that follow: byte chunks and CAN frames (a native
+        ``FrameBatch`` for a listener that ``reads_frame_batches``)."""
 
     def tick(self, now: float) -> None:
         """Called after every batch and when idle (``now``: wall-clock seconds), for flushing
@@ -67,6 +73,7 @@ LISTENERS: dict[str, str] = {
     "csv": "analyzer.sinks.csv:CsvListener",
     "parquet": "analyzer.parquet.writer:ParquetListener",
     "stats": "analyzer.sinks.stats:StatsListener",
+    "health": "analyzer.health.listener:HealthListener",
     "mcap": "analyzer.recording.recorder:McapRecorder",
     "rerun": "analyzer.plot.listener:RerunListener",
     "cycles": "analyzer.cycles.listener:CyclesListener",

@@ -98,7 +98,7 @@ class Session:
             opts.byte_time_s,
         )
         if isinstance(self.decoding, NativeCanDecoding) and not any(
-            x.wants_raw for x in self.listeners
+            x.wants_raw and not x.reads_frame_batches for x in self.listeners
         ):
             source.read_natively()  # a capture's frames straight into the native decoding
         self.counts = SessionCounts(live=source.live)

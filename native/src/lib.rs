@@ -8,6 +8,7 @@ mod alloc;
 pub mod decoders;
 pub mod generated;
 pub mod hash;
+pub mod health;
 pub mod json;
 pub mod parquet;
 pub mod pyfloat;

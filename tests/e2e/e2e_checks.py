@@ -18,6 +18,7 @@ from typing import Any, Generic, TypeVar
 
 import orjson
 import pytest
+from can_wire import reference_bits
 from e2e_inputs import EG2SCOPE, HEADLESS, ROOT
 from native_core import require_native
 
@@ -216,6 +217,53 @@ def stats_view(data: dict[str, Any]) -> dict[str, Any]:
         (c["bus"], c["protocol"], c["device"], c["name"]): _counts(c) for c in data["commands"]
     }
     return view
+
+
+# -- what stats' bus health must say ------------------------------------------------------------
+
+CAN_PROTOCOLS = ("eg2-can", "can")
+NO_TIMING = "no timing in this capture"
+
+
+def buses_of(decoded: Decoded, timed: bool) -> dict[str, dict[str, Any]]:
+    """What ``stats --format json``'s ``buses`` must say of each bus, counted from decode's
+    records (``timed``: the input carries times): a CAN bus's frames and their bits by the
+    second count (tests/can_wire.py), its error frames; a serial line's frames, its bytes (every
+    byte is in exactly one record) and their bits, 10 a byte."""
+    out = {}
+    for bus, records in decoded.by_bus().items():
+        if records[0]["protocol"] in CAN_PROTOCOLS:
+            errors = [r for r in records if "can_error_frame" in r["flags"]]
+            frames = [r for r in records if "can_error_frame" not in r["flags"]]
+            out[bus] = {"kind": "can", "frames": len(frames), "bits": sum(map(_bits, frames)),
+                        "error_frames": len(errors)}  # fmt: skip
+        else:
+            size = sum(r["length"] for r in records)
+            frames = sum(1 for r in records if r["kind"] == "frame")
+            out[bus] = {"kind": "serial", "frames": frames, "bytes": size, "bits": 10 * size}
+        out[bus]["timing"] = None if timed else NO_TIMING
+    return out
+
+
+def _bits(r: dict[str, Any]) -> int:
+    """A CAN record's frame's bits on the wire, from its identifier, DLC and data."""
+    fields = r["fields"]
+    remote = r["summary"].startswith("remote")
+    data = b"" if remote else bytes.fromhex(r["raw"])
+    return reference_bits(int(fields["id"], 16), fields.get("extended", True), remote,
+                          fields.get("dlc", r["length"]), data)  # fmt: skip
+
+
+def buses_view(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """``stats --format json``'s ``buses`` in the shape of ``buses_of``."""
+    out = {}
+    for b in data["buses"]:
+        keys = ("frames", "bits") + (("bytes",) if b["kind"] == "serial" else ())
+        out[b["bus"]] = {"kind": b["kind"], **{k: b[k] for k in keys}}
+        if b["kind"] == "can":
+            out[b["bus"]]["error_frames"] = b["error_frames"]["total"]
+        out[b["bus"]]["timing"] = b["timing"]
+    return out
 
 
 # -- sessions: a forced engine, state samples ---------------------------------------------------

@@ -1,5 +1,6 @@
 """``eg2scope stats --format json`` on every input kind agrees with decode's records: the
-command as a real process (its default engine), and in this process on each session engine."""
+command as a real process (its default engine), and in this process on each session engine;
+its bus health (``buses``) too, and each engine's is the process's, figure for figure."""
 
 from __future__ import annotations
 
@@ -10,17 +11,20 @@ import pytest
 from e2e_checks import (
     Prefetch,
     Ran,
+    buses_of,
+    buses_view,
     eg2scope_runs,
     force_session_engine,
     skip_unless_native,
     stats_of,
     stats_view,
 )
-from e2e_inputs import CAN_IDS, IDS
+from e2e_inputs import CAN_IDS, IDS, KINDS
 
 from analyzer.cli import main
 
 SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+RAW_DUMPS = {k.id for k in KINDS if k.file.endswith(".bin")}  # no times at all
 
 
 @pytest.fixture(scope="module")
@@ -36,12 +40,14 @@ def stats(request, inputs, tmp_path_factory) -> Iterator[Prefetch[Ran]]:
 def test_stats_process(kind: str, stats, reference) -> None:
     proc = stats(kind=kind).proc
     assert proc.returncode == 0, proc.stderr.decode()
-    assert stats_view(orjson.loads(proc.stdout)) == stats_of(reference.decoded(kind))
+    data = orjson.loads(proc.stdout)
+    assert stats_view(data) == stats_of(reference.decoded(kind))
+    assert buses_view(data) == buses_of(reference.decoded(kind), kind not in RAW_DUMPS)
 
 
 @pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
 def test_stats_on_each_engine(
-    kind: str, engine: str, inputs, reference, monkeypatch, capsys
+    kind: str, engine: str, inputs, reference, stats, monkeypatch, capsys
 ) -> None:
     if engine == "native":
         skip_unless_native()
@@ -49,3 +55,5 @@ def test_stats_on_each_engine(
     assert main(["stats", str(inputs[kind]), "--format", "json", "--no-progress"]) == 0
     data = orjson.loads(capsys.readouterr().out)
     assert stats_view(data) == stats_of(reference.decoded(kind))
+    assert buses_view(data) == buses_of(reference.decoded(kind), kind not in RAW_DUMPS)
+    assert data["buses"] == orjson.loads(stats(kind=kind).proc.stdout)["buses"]

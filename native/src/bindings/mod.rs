@@ -23,6 +23,7 @@ use std::path::PathBuf;
 
 mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output
 mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the native session
+mod python_health; // can_seconds: CAN frames per bus and second, for the bus load
 mod python_live; // CanStage, RecordBatch, can_raw_messages: the live CAN path
 mod python_rerun; // RecordBatch.rerun_log_rows: what a plot's logs show of a RecordBatch
 mod python_tracker; // Tracker, SampleBatch: the live state tracker
@@ -390,6 +391,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyDecodeRun>()?;
     python_arrow::register(m)?;
     python_frames::register(m)?;
+    python_health::register(m)?;
     python_live::register(m)?;
     python_tracker::register(m)?;
     m.add("Unsupported", m.py().get_type::<Unsupported>())?;

@@ -641,16 +641,16 @@ impl RecordBatchIter {
 
 /// What `feed` and `can_raw_messages` read of one Item: its bus (the str object) and frame
 /// (the data in a shared buffer, `data` its range there).
-struct ItemFrame<'py> {
-    bus: Bound<'py, PyString>,
-    t: Option<f64>,
-    aid: u32,
-    extended: bool,
-    remote: bool,
-    error: bool,
-    fd: bool,
-    dlc: Option<usize>,
-    data: std::ops::Range<usize>,
+pub(super) struct ItemFrame<'py> {
+    pub(super) bus: Bound<'py, PyString>,
+    pub(super) t: Option<f64>,
+    pub(super) aid: u32,
+    pub(super) extended: bool,
+    pub(super) remote: bool,
+    pub(super) error: bool,
+    pub(super) fd: bool,
+    pub(super) dlc: Option<usize>,
+    pub(super) data: std::ops::Range<usize>,
     /// only read for `can_raw_messages`
     channel: Option<Bound<'py, PyAny>>,
 }
@@ -684,8 +684,16 @@ fn exact_int<'py, T: FromPyObject<'py>>(v: &Bound<'py, PyAny>, name: &str) -> Py
     v.extract()
 }
 
+/// Whether an Item's payload is a CanFrame (not a byte chunk).
+pub(super) fn is_can_item(item: &Bound<'_, PyAny>) -> PyResult<bool> {
+    let py = item.py();
+    let can_frame = CAN_FRAME.import(py, "decoders.model", "CanFrame")?;
+    let frame = item.getattr(intern!(py, "payload"))?;
+    Ok(frame.get_type().is(can_frame) || frame.is_instance(can_frame)?)
+}
+
 /// Read one Item (a CanFrame payload) into `bytes` and an `ItemFrame`.
-fn read_item<'py>(
+pub(super) fn read_item<'py>(
     item: &Bound<'py, PyAny>,
     bytes: &mut Vec<u8>,
     with_channel: bool,
@@ -770,7 +778,7 @@ fn read_item<'py>(
 }
 
 /// Every item of `items` (a list, a tuple or any iterable), in order.
-fn for_each_item<'py>(
+pub(super) fn for_each_item<'py>(
     items: &Bound<'py, PyAny>,
     mut f: impl FnMut(&Bound<'py, PyAny>) -> PyResult<()>,
 ) -> PyResult<()> {

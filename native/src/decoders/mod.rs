@@ -1,6 +1,8 @@
 //! The decoders, each mirroring the module of the same name in decoders/.
 
 #[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
+pub mod can_bits;
+#[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
 pub mod eg2_can;
 #[warn(clippy::too_many_lines, clippy::cognitive_complexity)] // clippy.toml: the limits
 pub mod eg2_serial;

@@ -1,0 +1,70 @@
+"""``HealthListener``: the health of every bus of a session, from its raw input (CAN frames,
+serial reads with their times) and, for byte streams, the records found in them.
+
+CAN frames are counted a batch at a time by ``can_load.can_seconds``, which takes the native
+core's ``FrameBatch`` as it takes a list of Items, so the listener says
+``reads_frame_batches``: a candump log is still read natively under it. Records are read only
+for serial buses (their frames delimit the gaps and turnaround); a CAN-only session's records,
+a native ``RecordBatch``, are never touched.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from decoders.model import CanFrame
+
+from ..session.listener import Listener
+from .bus import BusHealth, CanBusHealth, SerialBusHealth
+from .can_load import can_seconds
+from .rates import BusRates
+
+
+class HealthListener(Listener):
+    wants_raw = True
+    reads_frame_batches = True
+
+    def __init__(self, rates: BusRates | None = None) -> None:
+        self.rates = rates or BusRates()
+        self.label = "bus health"
+        self.can: dict[str, CanBusHealth] = {}
+        self.serial: dict[str, SerialBusHealth] = {}
+
+    def on_raw(self, items: Any) -> None:
+        seconds, errors, others = can_seconds(items)
+        for second in seconds:
+            self._can(second[0]).load.add(second)
+        for bus, t, error_class, data in errors:
+            self._can(bus).errors.add(t, error_class, data)
+        if others:  # byte chunks among the items (never in a native FrameBatch)
+            for item in items:
+                chunk = item.payload
+                if not isinstance(chunk, CanFrame):
+                    self._serial(item.bus).line.add_read(item.stream, chunk)
+
+    def on_records(self, records: Any) -> None:
+        lines = self.serial
+        if not lines:
+            return  # CAN records: the frames said it all
+        for rec in records:
+            health = lines.get(rec.bus)
+            if health is not None:
+                health.line.add_record(rec)
+
+    def buses(self) -> list[dict[str, Any]]:
+        """Every bus's figures, by bus name."""
+        every: list[BusHealth] = [*self.can.values(), *self.serial.values()]
+        return [b.figures() for b in sorted(every, key=lambda b: (b.bus, b.kind))]
+
+    def _can(self, bus: str) -> CanBusHealth:
+        health = self.can.get(bus)
+        if health is None:
+            health = self.can[bus] = CanBusHealth(bus, self.rates.can(bus))
+        return health
+
+    def _serial(self, bus: str) -> SerialBusHealth:
+        health = self.serial.get(bus)
+        if health is None:
+            rate = self.rates.serial(bus)
+            health = self.serial[bus] = SerialBusHealth(bus, rate, self.rates.ports.get(bus))
+        return health

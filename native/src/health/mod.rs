@@ -1,0 +1,3 @@
+//! Bus health (analyzer/health/): the parts that run once per frame.
+
+pub mod can_seconds;
