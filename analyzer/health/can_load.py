@@ -136,6 +136,8 @@ class CanLoad:
         """``frames``, ``uncounted_frames``, ``bits``, ``duration_s``, ``frames_per_s`` and
         ``load_pct`` (docs/contracts.md, statistics)."""
         span = self.span(bitrate)
+        if self.frames - self.untimed < 2:
+            span = None  # one frame spans only itself: always 100%, which says nothing
         start, end = span if span is not None else (None, None)
         load: dict[str, float | None] = {"mean": None, "p95": None, "max": None}
         if span is not None:

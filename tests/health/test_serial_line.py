@@ -100,31 +100,40 @@ def send_pairs(port: serial.Serial) -> None:
 
 
 def test_line_use_and_frames_closer_than_t3_5_on_a_pty() -> None:
-    with (
-        tapped_line(MODBUS_RTU, BAUD, "wire") as (line, health, reads),
-        serial.Serial(line.path("wire"), BAUD) as port,
-    ):
-        send_pairs(port)
-    (bus,) = health.buses()
-    sent = 12 * (len(REQUEST) + len(RESPONSE))
-    rate = (bus["bus"], bus["kind"], bus["baud"], bus["baud_from"])
-    assert rate == ("line", "serial", BAUD, "--baud")
-    assert (bus["bytes"], bus["bits"], bus["frames"]) == (sent, sent * 10, 24)
-    assert bus["protocol"] == MODBUS_RTU and bus["timing"] is None
-    # the span: from the earliest start a read's bytes can have had (counted back at the baud
-    # from when it came; a pty passes bytes at once, so a later read can count back further)
-    start = min(t - n * BYTE_S for _, n, t in reads.reads)
-    end = max(t for _, _, t in reads.reads)
-    load = 100 * sent * 10 / BAUD / (end - start)
-    assert bus["load_pct"]["mean"] == pytest.approx(load, abs=1e-3)
-    assert bus["duration_s"] == pytest.approx(end - start, abs=1e-6)
-    # every pair whose two frames came in two reads was measured, and flagged if close
-    pair = len(REQUEST) + len(RESPONSE)
-    close_apart = [i for i in CLOSE if not reads.one_read(i * pair + 7, i * pair + 8)]
+    """Timing on a shared machine can spoil one run (a write or the tap's read late by more
+    than the silences): up to three runs, and the figures that depend on timing from the first
+    run whose reads kept the CLOSE pairs apart; the counts hold on every run."""
+    for _attempt in range(3):
+        with (
+            tapped_line(MODBUS_RTU, BAUD, "wire") as (line, health, reads),
+            serial.Serial(line.path("wire"), BAUD) as port,
+        ):
+            send_pairs(port)
+        (bus,) = health.buses()
+        sent = 12 * (len(REQUEST) + len(RESPONSE))
+        rate = (bus["bus"], bus["kind"], bus["baud"], bus["baud_from"])
+        assert rate == ("line", "serial", BAUD, "--baud")
+        assert (bus["bytes"], bus["bits"], bus["frames"]) == (sent, sent * 10, 24)
+        assert bus["protocol"] == MODBUS_RTU and bus["timing"] is None
+        # the span: from the earliest start a read's bytes can have had (counted back at the
+        # baud from when it came; a pty passes bytes at once, so a later read can count back
+        # further)
+        start = min(t - n * BYTE_S for _, n, t in reads.reads)
+        end = max(t for _, _, t in reads.reads)
+        load = 100 * sent * 10 / BAUD / (end - start)
+        assert bus["load_pct"]["mean"] == pytest.approx(load, abs=1e-3)
+        assert bus["duration_s"] == pytest.approx(end - start, abs=1e-6)
+        assert bus["modbus_t3_5_ms"] == pytest.approx(3.5 * BYTE_S * 1000, abs=1e-3)
+        gaps = bus["gaps_ms"]
+        assert gaps["count"] + gaps["unmeasured"] == 23
+        # every pair whose two frames came in two reads was measured, and flagged if close
+        pair = len(REQUEST) + len(RESPONSE)
+        close_apart = [i for i in CLOSE if not reads.one_read(i * pair + 7, i * pair + 8)]
+        timed = bus["closer_than_t3_5"] == len(close_apart) and bus["latency_timer"] is None
+        if close_apart and timed:
+            break
     assert close_apart and bus["closer_than_t3_5"] == len(close_apart)
-    assert bus["modbus_t3_5_ms"] == pytest.approx(3.5 * BYTE_S * 1000, abs=1e-3)
-    gaps = bus["gaps_ms"]
-    assert gaps["count"] + gaps["unmeasured"] == 23 and gaps["min"] < bus["modbus_t3_5_ms"]
+    assert gaps["min"] < bus["modbus_t3_5_ms"]
     assert bus["latency_timer"] is None  # a pty delivers at once
 
 
