@@ -194,6 +194,9 @@ BAD_OPTIONS: list[tuple[str, list[str], str]] = [
     ("tui", [SERIAL_DUMP, "--demo"], "not both"),
     ("batch", [SERIAL_DUMP, "-o", "fleet", "--workers", "0"], "must be 1 or more"),
     ("batch", [SERIAL_DUMP], "required: --output"),
+    ("cycles", [], "no cycles to find"),
+    ("cycles", [SERIAL_DUMP, "--demo"], "not both"),
+    ("cycles", [SERIAL_DUMP, "--device", "-1"], "must be 0 or more"),
 ]
 
 
