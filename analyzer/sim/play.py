@@ -195,22 +195,17 @@ class Player:
             self._poll_for(watch, self.motion_timeout_s, lambda r: self._advance(step, r, watch))
         else:
             self._poll_for(watch, UNANSWERED_WATCH_S / self.pace, self._never)
-        self._poll_for(watch, self.dwell_s, self._never)  # the arm moves meanwhile
-        world.place_jam(device, None)
-        played = Played(
-            self.scenario.name,
-            self.protocol,
-            self.bus,
-            device,
-            index,
-            step,
-            start,
-            time.time(),
-            answered,
-            watch.states,
-            watch.faults,
-        )
-        self.log.add(played)
+        try:
+            self._poll_for(watch, self.dwell_s, self._never)  # the arm moves meanwhile
+        finally:  # the motion is over: its truth is known, even if the simulator stops now
+            world.place_jam(device, None)
+            self.log.add(self._played(index, step, start, answered, watch))
+
+    def _played(
+        self, index: int, step: Step, start: float, answered: bool, watch: _Watch
+    ) -> Played:
+        where = (self.scenario.name, self.protocol, self.bus, self.device)
+        return Played(*where, index, step, start, time.time(), answered, watch.states, watch.faults)
 
     def _send(self, step: Step) -> bool:
         """The step's motion command; True if it was answered (a muted gripper hears none)."""

@@ -4,9 +4,9 @@ what eg2scope detects against what really happened.
 A ``Scenario`` is a script of ``Step``s, each one grip cycle on one gripper: the motion command
 the host sends (catch, continuous catch, release, seek), what the world does meanwhile (a part
 between the jaws, a part that slips, an obstruction that stalls the jaw, a command the gripper
-never hears, a bus-off on CAN, a stop from the host) and the cycle's true outcome, named as issue
-20 names them (``OUTCOMES``), with the opening where contact was made. Pure data: ``play``
-plays a script on a bus, ``script(bus)`` says exactly what it plays there.
+never hears, a bus-off on CAN, a stop from the host) and the cycle's true outcome (one of
+``SCRIPT_OUTCOMES``, named where the cycles name them), with the opening where contact was made.
+Pure data: ``play`` plays a script on a bus, ``script(bus)`` says exactly what it plays there.
 
 Openings are in the protocol's unit, 0-1000 of the stroke (1000 = 70 mm).
 """
@@ -19,21 +19,23 @@ from typing import Any, Final
 
 from decoders.registers import opening_mm
 
+from ..cycles.model import (
+    CLOSED_EMPTY,
+    FAULTED,
+    GRIPPED,
+    OPENED,
+    POSITIONED,
+    SLIP,
+    STOPPED,
+    UNANSWERED,
+)
 from .gripper import FAULT_STALL
 
-OUTCOMES: Final = (
-    "gripped",  # stopped by the force limit on a part (state 6)
-    "closed_empty",  # closed fully without contact (state 2): the part was missed
-    "opened",  # fully open (state 1)
-    "positioned",  # reached the seek target (state 3)
-    "stopped",  # a stop command halted the motion (state 3)
-    "faulted",  # fault bits during the cycle
-    "unanswered",  # the motion command was never answered
-    "unfinished",  # the capture ended first
-)
+# the outcomes a script plays, named where the cycles name them (``unfinished`` is a capture's)
+SCRIPT_OUTCOMES: Final = (GRIPPED, CLOSED_EMPTY, OPENED, POSITIONED, STOPPED, FAULTED, UNANSWERED)
 COMMANDS: Final = ("catch", "continuous catch", "release", "seek")
 CLOSING: Final = frozenset(("catch", "continuous catch", "seek"))  # a part is placed first
-WARNINGS: Final = ("slip",)  # the opening keeps closing after contact, or 6 is left while holding
+WARNINGS: Final = (SLIP,)  # the opening keeps closing after contact, or 6 is left while holding
 DEFAULT_PART: Final = 420  # 29.4 mm
 PART_RANGE: Final = (100, 900)  # a part's width the scripts take (it must be able to slip)
 SLIP_FRACTION: Final = 0.6  # a slipping part ends at this fraction of its width
@@ -45,7 +47,7 @@ STOP_AT: Final = 650
 @dataclass(frozen=True)
 class Step:
     """One grip cycle. ``command``: one of ``COMMANDS`` (``position``: a seek's target);
-    ``outcome``: one of ``OUTCOMES``; ``part``: the width of the part placed between the jaws
+    ``outcome``: one of ``SCRIPT_OUTCOMES``; ``part``: the width of the part placed between the jaws
     before a closing command (None: none); ``contact``: the opening where the jaw met it (None:
     no contact); ``slip_to``: after contact the part slips to this width (a continuous catch
     closes on it again); ``jam_at``: an obstruction the closing jaw stalls on; ``faults``: the
@@ -68,7 +70,7 @@ class Step:
     warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if self.command not in COMMANDS or self.outcome not in OUTCOMES:
+        if self.command not in COMMANDS or self.outcome not in SCRIPT_OUTCOMES:
             raise ValueError(f"a step needs a known command and outcome: {self}")
 
     @property
@@ -100,7 +102,7 @@ def _slip(part: int) -> Step:
         part=part,
         contact=part,
         slip_to=slip_to,
-        warnings=("slip",),
+        warnings=(SLIP,),
     )
 
 

@@ -22,7 +22,7 @@ from analyzer.commands.demo import demo_options
 from analyzer.errors import UsageError
 from analyzer.sim.can_trouble import bus_off_frames
 from analyzer.sim.gripper import FAULT_STALL, STOPPED, GripperModel
-from analyzer.sim.scenarios import COMMANDS, NAMES, OUTCOMES, SCENARIOS, listing, scenario
+from analyzer.sim.scenarios import COMMANDS, NAMES, SCENARIOS, SCRIPT_OUTCOMES, listing, scenario
 from decoders import build
 from decoders.eg2_serial import Eg2SerialDecoder
 from decoders.model import RESPONSE, Chunk
@@ -41,7 +41,9 @@ def test_every_scenario_is_listed_on_a_line_of_its_own() -> None:
 def test_every_step_names_a_known_command_and_outcome(name: str) -> None:
     for protocol in ("serial", "modbus", "can"):
         script = SCENARIOS[name].script(protocol)
-        assert script and all(s.command in COMMANDS and s.outcome in OUTCOMES for s in script)
+        assert script and all(
+            s.command in COMMANDS and s.outcome in SCRIPT_OUTCOMES for s in script
+        )
         assert script[-1].command == "release"  # every scenario ends open
         json.dumps(SCENARIOS[name].to_json(protocol))  # plain values only
         for step in script:

@@ -59,20 +59,34 @@ class Reading:
     fault: int
 
 
-def record_argv(name: str, folder: Path) -> list[str]:
+def record_argv(name: str, folder: Path, buses: str | None = None) -> list[str]:
     duration = DURATION_S.get(name, DEFAULT_DURATION_S)
     mcap, truth = folder / f"{name}.mcap", folder / f"{name}.truth.jsonl"
-    return [*EG2SCOPE, "record", "--demo", "--scenario", name, "--time-scale", str(TIME_SCALE),
-            "--duration", str(duration), "-o", str(mcap), "--truth", str(truth)]  # fmt: skip
+    only = [] if buses is None else ["--buses", buses]
+    scale = ["--time-scale", str(TIME_SCALE), "--duration", str(duration)]
+    return [*EG2SCOPE, "record", "--demo", *only, "--scenario", name, *scale,
+            "-o", str(mcap), "--truth", str(truth)]  # fmt: skip
+
+
+def record_scenarios(names: list[str], folder: Path, buses: str | None = None) -> dict[str, str]:
+    """Record the scenarios into ``folder`` (``NAME.mcap``, ``NAME.truth.jsonl``) a few at a
+    time (a loaded machine delays the simulated answers); each one's stderr by name. ``buses``:
+    the demo's ``--buses`` (default all three)."""
+    errors: dict[str, str] = {}
+    for first in range(0, len(names), AT_ONCE):
+        batch = {n: _start(record_argv(n, folder, buses)) for n in names[first : first + AT_ONCE]}
+        errors |= {n: _finish(p, f"record {n}") for n, p in batch.items()}
+    return errors
+
+
+def read_truth(folder: Path, name: str) -> list[dict[str, Any]]:
+    truth = (folder / f"{name}.truth.jsonl").read_text().splitlines()
+    return [json.loads(line) for line in truth]
 
 
 def record_all(names: list[str], folder: Path) -> dict[str, Capture]:
-    """Record the scenarios a few at a time (a loaded machine delays the simulated answers),
-    then decode every recording at once."""
-    errors: dict[str, str] = {}
-    for first in range(0, len(names), AT_ONCE):
-        batch = {n: _start(record_argv(n, folder)) for n in names[first : first + AT_ONCE]}
-        errors |= {n: _finish(p, f"record {n}") for n, p in batch.items()}
+    """Record the scenarios, then decode every recording at once."""
+    errors = record_scenarios(names, folder)
     decoders = {
         n: _start([*EG2SCOPE, "decode", str(folder / f"{n}.mcap"), "--format", "jsonl"])
         for n in names
@@ -81,12 +95,8 @@ def record_all(names: list[str], folder: Path) -> dict[str, Capture]:
     for name, proc in decoders.items():
         stdout, stderr = proc.communicate(timeout=60)
         assert proc.returncode in (0, 3), f"decode {name}: {proc.returncode} {stderr}"
-        truth = (folder / f"{name}.truth.jsonl").read_text().splitlines()
-        out[name] = Capture(
-            [json.loads(line) for line in stdout.splitlines()],
-            [json.loads(line) for line in truth],
-            errors[name],
-        )
+        records = [json.loads(line) for line in stdout.splitlines()]
+        out[name] = Capture(records, read_truth(folder, name), errors[name])
     return out
 
 
