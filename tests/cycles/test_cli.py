@@ -14,6 +14,7 @@ from typing import Any
 import orjson
 import pyarrow.parquet as pq
 import pytest
+from native_core import needs_native
 
 from analyzer.cycles.model import KEYS
 
@@ -114,13 +115,17 @@ def demo_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_the_demo_recording(demo_recording: Path) -> None:
     """The grippers close on their parts and open again on every bus; the stop ends the rest
-    (a loaded machine may garble a line's frames: a cycle then says what it could not read). A
-    recording of serial lines is decoded in Python: the native engine says why not."""
+    (a loaded machine may garble a line's frames: a cycle then says what it could not read)."""
     cycles = jsonl(str(demo_recording))
     assert {c["bus"] for c in cycles} == {"rs232", "rs485", "can0"}
     gripped = [c for c in cycles if c["outcome"] == "gripped"]
     assert gripped and all(c["time_to_contact_ms"] > 0 for c in gripped)
     assert all(c["width_mm"] in (29.4, 17.5) for c in gripped)  # the demo's parts
+
+
+@needs_native
+def test_the_native_engine_says_why_not_on_serial_lines(demo_recording: Path) -> None:
+    """A recording of serial lines is decoded in Python: the native engine says why not."""
     proc = eg2scope("cycles", str(demo_recording), "--engine", "native")
     assert proc.returncode == 2 and b"the input is not CAN" in proc.stderr
 

@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 import pytest
 from cycle_script import BROADCAST, PROTOCOLS, Script
+from native_core import require_native
 
 from analyzer.cycles.model import Cycle
 from decoders.model import EG2_CAN, EG2_SERIAL
@@ -19,6 +20,8 @@ CASES = [(p, "python") for p in PROTOCOLS] + [(EG2_CAN, "native")]
 
 @pytest.fixture(params=CASES, ids=lambda c: f"{c[0]}-{c[1]}")
 def case(request: pytest.FixtureRequest) -> tuple[str, str]:
+    if request.param[1] == "native":
+        require_native()
     return request.param  # type: ignore[no-any-return]
 
 
