@@ -11,6 +11,7 @@ from decoders.registry import resolve_protocol
 from ..errors import UsageError
 from ..plot.target import DEFAULT as DEFAULT_TARGET
 from ..session.capture import CaptureOptions
+from ..session.engine import ENGINES
 from ..sources.pacing import parse_speed
 from .helptext import CAPTURE_FILE
 
@@ -194,4 +195,27 @@ def add_rerun_argument(parser: argparse.ArgumentParser) -> None:
         help="also plot the session in Rerun: spawn (a viewer, the default when a display can "
         "be opened; otherwise a dated .rrd file is written here), web (Rerun's web viewer on "
         "127.0.0.1), a viewer URL rerun+http://HOST:PORT/proxy, or a file NAME.rrd",
+    )
+
+
+def add_replay_arguments(parser: argparse.ArgumentParser, unpaced: str, same: str) -> None:
+    """A capture's replay options: ``--speed`` (``unpaced``: what happens without it),
+    ``--no-progress`` and ``--engine`` (``same``: what the choice leaves as it is)."""
+    capture = parser.add_argument_group("capture replay")
+    capture.add_argument(
+        "--speed",
+        type=speed_type,
+        default=None,
+        metavar="X",
+        help="replay with the capture's own timing sped up X times (1 = real time) or 'max' "
+        f"(default: {unpaced})",
+    )
+    capture.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    capture.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="auto",
+        help="the session's decoding: auto (the native core for CAN captures where it is built, "
+        "else the Python decoders; default), python, or native (a usage error where it cannot "
+        f"decode the capture). {same}",
     )

@@ -10,8 +10,7 @@ from ..cycles.run import CyclesOptions, cycles
 from ..errors import UsageError
 from ..live_runner import LiveOptions
 from ..session.capture import CaptureOptions
-from ..session.engine import ENGINES
-from .common import non_negative_int, positive_float, positive_int, speed_type
+from .common import add_replay_arguments, non_negative_int, positive_float, positive_int
 from .decode import to_a_terminal
 from .demo import add_demo_arguments, demo_options
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
@@ -59,24 +58,7 @@ def add_subparser(sub: Any) -> None:
         "file", nargs="?", help=f"{CAPTURE_FILE} (or give a live source or --demo instead)"
     )
     _add_output_arguments(parser)
-    capture = parser.add_argument_group("capture replay")
-    capture.add_argument(
-        "--speed",
-        type=speed_type,
-        default=None,
-        metavar="X",
-        help="replay with the capture's own timing sped up X times (1 = real time) or 'max' "
-        "(default: as fast as possible)",
-    )
-    capture.add_argument("--no-progress", action="store_true", help="never show a progress bar")
-    capture.add_argument(
-        "--engine",
-        choices=ENGINES,
-        default="auto",
-        help="the session's decoding: auto (the native core for CAN captures where it is built, "
-        "else the Python decoders; default), python, or native (a usage error where it cannot "
-        "decode the capture). The cycles are the same either way",
-    )
+    add_replay_arguments(parser, "as fast as possible", "The cycles are the same either way")
     add_source_arguments(parser)
     parser.add_argument(
         "--demo",

@@ -9,8 +9,7 @@ from typing import Any
 from ..plot.launch import PlotOptions, plot
 from ..plot.target import TargetChoice
 from ..session.capture import CaptureOptions
-from ..session.engine import ENGINES
-from .common import add_session_arguments, live_options, speed_type
+from .common import add_replay_arguments, add_session_arguments, live_options
 from .demo import add_demo_arguments, demo_options
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, tap_options
@@ -68,24 +67,7 @@ def add_subparser(sub: Any) -> None:
         help="serve Rerun's web viewer on 127.0.0.1 (this machine only) until Ctrl-C or "
         "SIGTERM; the printed address asks for the WebGL renderer, which needs no GPU",
     )
-    capture = parser.add_argument_group("capture replay")
-    capture.add_argument(
-        "--speed",
-        type=speed_type,
-        default=None,
-        metavar="X",
-        help="replay with the capture's own timing sped up X times (1 = real time) or 'max' "
-        "(default: all at once)",
-    )
-    capture.add_argument("--no-progress", action="store_true", help="never show a progress bar")
-    capture.add_argument(
-        "--engine",
-        choices=ENGINES,
-        default="auto",
-        help="the session's decoding: auto (the native core for CAN captures where it is built, "
-        "else the Python decoders; default), python, or native (a usage error where it cannot "
-        "decode the capture). The plot is the same either way",
-    )
+    add_replay_arguments(parser, "all at once", "The plot is the same either way")
     add_source_arguments(parser)
     parser.add_argument(
         "--demo",
