@@ -219,3 +219,16 @@ def add_replay_arguments(parser: argparse.ArgumentParser, unpaced: str, same: st
         "else the Python decoders; default), python, or native (a usage error where it cannot "
         f"decode the capture). {same}",
     )
+
+
+def whole_capture_options(args: argparse.Namespace) -> CaptureOptions:
+    """The capture of a command that reads every record (no record filter: ``plot``,
+    ``cycles``), from its file and ``add_replay_arguments``' options."""
+    return CaptureOptions(
+        path=args.file,
+        protocol=args.protocol,
+        bus=args.bus,
+        speed=args.speed,
+        progress=not args.no_progress,
+        engine=args.engine,
+    )

@@ -9,8 +9,13 @@ from ..cycles.outputs import FORMATS
 from ..cycles.run import CyclesOptions, cycles
 from ..errors import UsageError
 from ..live_runner import LiveOptions
-from ..session.capture import CaptureOptions
-from .common import add_replay_arguments, non_negative_int, positive_float, positive_int
+from .common import (
+    add_replay_arguments,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    whole_capture_options,
+)
 from .decode import to_a_terminal
 from .demo import add_demo_arguments, demo_options
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
@@ -138,18 +143,6 @@ def cycles_options(args: argparse.Namespace) -> CyclesOptions:
             queue_size=args.queue_size,
         ),
         taps=tap_options(args),
-        capture=_capture(args) if args.file else None,
+        capture=whole_capture_options(args) if args.file else None,  # --device picks cycles
         demo=demo_options(args) if args.demo else None,
-    )
-
-
-def _capture(args: argparse.Namespace) -> CaptureOptions:
-    """The capture to read: every record (``--device`` picks cycles, not records)."""
-    return CaptureOptions(
-        path=args.file,
-        protocol=args.protocol,
-        bus=args.bus,
-        speed=args.speed,
-        progress=not args.no_progress,
-        engine=args.engine,
     )

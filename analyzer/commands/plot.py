@@ -8,8 +8,12 @@ from typing import Any
 
 from ..plot.launch import PlotOptions, plot
 from ..plot.target import TargetChoice
-from ..session.capture import CaptureOptions
-from .common import add_replay_arguments, add_session_arguments, live_options
+from .common import (
+    add_replay_arguments,
+    add_session_arguments,
+    live_options,
+    whole_capture_options,
+)
 from .demo import add_demo_arguments, demo_options
 from .helptext import CAPTURE_FILE, EXIT_STATUS, HelpFormatter, epilog
 from .livesource import add_source_arguments, tap_options
@@ -91,18 +95,6 @@ def plot_options(args: argparse.Namespace) -> PlotOptions:
         ),
         live=live_options(args),
         taps=tap_options(args),
-        capture=capture_to_plot(args) if args.file else None,
+        capture=whole_capture_options(args) if args.file else None,
         demo=demo_options(args) if args.demo else None,
-    )
-
-
-def capture_to_plot(args: argparse.Namespace) -> CaptureOptions:
-    """The capture to plot (no record filter: every record is plotted)."""
-    return CaptureOptions(
-        path=args.file,
-        protocol=args.protocol,
-        bus=args.bus,
-        speed=args.speed,
-        progress=not args.no_progress,
-        engine=args.engine,
     )
