@@ -117,3 +117,13 @@ def test_no_rows_unless_asked(bus_off_recording: Path) -> None:
     health = HealthListener()
     run_capture(CaptureOptions(str(bus_off_recording), progress=False), [health])
     assert health.take_seconds(final=True) == [] and health.buses()
+
+
+def test_the_simulated_modbus_line_keeps_its_silence(bus_off_recording: Path) -> None:
+    """The simulated slave answers, and the simulated host asks again, no sooner than Modbus
+    RTU's t3.5 (as real ones must): the demo's health shows no frames too close (a tap late on a
+    loaded machine may squeeze a few; before, 40% of the frames were)."""
+    (line,) = [b for b in cli_buses(bus_off_recording) if b["bus"] == "rs485"]
+    assert line["closer_than_t3_5"] <= line["frames"] // 50
+    (turnaround,) = line["turnaround_ms"]
+    assert turnaround["median"] >= line["modbus_t3_5_ms"]
