@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 import pyarrow as pa
+import pyarrow.compute as pc
 
+from ..cycles.commands import CODES
 from ..cycles.listener import CyclesListener
 from ..health.listener import HealthListener
 from ..health.rates import BusRates
@@ -28,6 +30,8 @@ from .tables import RECORDS_SCHEMA, STATES_SCHEMA, state_rows, states_table, wit
 
 if TYPE_CHECKING:
     from ..session.batches import RecordSequence, SampleSequence
+
+_CODES: Final = pa.array(sorted(CODES), pa.int64())
 
 #: how far a capture has got: (bytes of the file read, records decoded)
 Progress = Callable[[int, int], None]
@@ -85,8 +89,10 @@ class BusViews:
     def add_columns(self, records: pa.Table, samples: pa.Table | None) -> None:
         """One batch of a native run: records in ``PARSE_SCHEMA``, samples in ``STATE_COLUMNS``."""
         # the listener reads a sequence's bulk methods only, which these have (as a native
-        # batch has them)
-        batch: Any = ArrowRecords(records)
+        # batch has them); of the records it takes only those of a candidate's code: the
+        # others are left out here, in one pass over the column
+        candidates = records.filter(pc.is_in(records.column("code"), value_set=_CODES))
+        batch: Any = ArrowRecords(candidates)
         self.cycles_listener.on_records(batch)
         if samples is not None:
             states: Any = ArrowSamples(samples)
