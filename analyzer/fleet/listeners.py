@@ -67,8 +67,9 @@ class CaptureTables(JsonlTables):
 class BusViews:
     """A capture's grip cycles (``cycles/``) and its buses' health seconds (``health/``): the
     listeners a session carries beside its records (``listeners``), or fed the native run's
-    columns (``add_columns``) and the capture's raw frames (``add_raw``). ``close`` ends both
-    and writes the health rows; ``cycles`` and ``seconds``: the rows written."""
+    columns (``add_columns``) and the capture's raw frames (``add_raw``), then ended
+    (``close_cycles``; a session closes its own). ``write_health`` writes the health rows at
+    the end; ``cycles`` and ``seconds``: the rows written."""
 
     def __init__(self, files: PartitionFiles, path: str, rates: BusRates) -> None:
         self.files = files
