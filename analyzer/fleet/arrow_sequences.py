@@ -46,8 +46,10 @@ class ArrowRecords:
         return self.table.column(name).to_pylist()
 
     def take(self, indexes: Sequence[int]) -> list[Record]:
-        rows = self.table.take(pa.array(indexes, pa.int64())).to_pylist()
-        return [Record.from_dict(_record_dict(row)) for row in rows]
+        table = self.table
+        if len(indexes) != table.num_rows:  # (every row: a batch of candidates, as a rule)
+            table = table.take(pa.array(indexes, pa.int64()))
+        return [Record.from_dict(_record_dict(row)) for row in table.to_pylist()]
 
 
 def _record_dict(row: dict[str, Any]) -> dict[str, Any]:
@@ -93,21 +95,25 @@ class ArrowSamples:
         kept = np.flatnonzero(which)
         if not len(kept):
             return []
-        table = table.take(pa.array(kept))
-        which = which[kept]
+        table = table.select(["bus", "device", "t", "seq", *fields]).take(pa.array(kept))
         key = pc.binary_join_element_wise(
             table.column("bus"),
             pc.cast(table.column("device"), pa.string()),
-            pc.cast(pa.array(which), pa.string()),
+            pc.cast(pa.array(which[kept]), pa.string()),
             _KEY_SEPARATOR,
         )
+        groups = pc.unique(key)  # in the order they first appear
+        group = pc.index_in(key, value_set=groups).to_numpy(zero_copy_only=False)
+        order = np.argsort(group, kind="stable")  # each group's rows together, in order
+        ends = np.cumsum(np.bincount(group, minlength=len(groups))).tolist()
+        table = table.take(pa.array(order))
+        values = {name: table.column(name).to_pylist() for name in ("t", "seq", *fields)}
         out = []
-        for value in pc.unique(key).to_pylist():
+        for value, start, end in zip(groups.to_pylist(), [0, *ends], ends, strict=False):
             bus, device, bits = value.split(_KEY_SEPARATOR.as_py())
             names = tuple(f for i, f in enumerate(fields) if int(bits) >> i & 1)
-            rows = table.filter(pc.equal(key, pa.scalar(value, pa.string())))
-            columns = [rows.column(name).to_pylist() for name in names]
-            times, seqs = rows.column("t").to_pylist(), rows.column("seq").to_pylist()
+            columns = [values[name][start:end] for name in names]
+            times, seqs = values["t"][start:end], values["seq"][start:end]
             out.append((bus, int(device), names, times, seqs, columns))
         return out
 
