@@ -129,7 +129,7 @@ def _decode(
         damage = _fill(opts, job.engine, reader, (tables, views), progress, interrupted)
         if interrupted():
             raise KeyboardInterrupt
-        views.write_health()
+        views.write_health(final=True)
         stats = tables.summary.stats
         if damage and not stats.records:  # nothing of it could be read
             files.discard()

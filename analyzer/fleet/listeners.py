@@ -68,8 +68,9 @@ class BusViews:
     """A capture's grip cycles (``cycles/``) and its buses' health seconds (``health/``): the
     listeners a session carries beside its records (``listeners``), or fed the native run's
     columns (``add_columns``) and the capture's raw frames (``add_raw``), then ended
-    (``close_cycles``; a session closes its own). ``write_health`` writes the health rows at
-    the end; ``cycles`` and ``seconds``: the rows written."""
+    (``close_cycles``; a session closes its own). The seconds every bus has completed are
+    written as they come (``write_health``: after every batch; ``final``, at the end, the
+    rest), so memory holds only the open ones; ``cycles`` and ``seconds``: the rows written."""
 
     def __init__(self, files: PartitionFiles, path: str, rates: BusRates) -> None:
         self.files = files
@@ -81,7 +82,7 @@ class BusViews:
 
     @property
     def listeners(self) -> list[Listener]:
-        return [self.cycles_listener, self.health]
+        return [self.cycles_listener, self.health, _HealthRows(self)]
 
     @property
     def cycles(self) -> int:
@@ -101,15 +102,29 @@ class BusViews:
 
     def add_raw(self, items: object) -> None:
         self.health.on_raw(items)
+        self.write_health()
 
     def close_cycles(self) -> None:
         """The end of a native run (a session closes its listeners itself)."""
         self.cycles_listener.close()
 
-    def write_health(self) -> None:
-        rows = health_table(self.health.take_seconds(final=True), self.health.rates)
-        self.seconds = rows.num_rows
-        write_health(self.files, self.path, rows)
+    def write_health(self, final: bool = False) -> None:
+        seconds = self.health.take_seconds(final)
+        if seconds:
+            self.seconds += len(seconds)
+            write_health(self.files, self.path, health_table(seconds, self.health.rates))
+
+
+class _HealthRows(Listener):
+    """After every batch of a session (its records come after its raw input, and reach this
+    listener after the health's), the health seconds its buses completed, written."""
+
+    def __init__(self, views: BusViews) -> None:
+        self.views = views
+        self.label = "fleet health"
+
+    def on_records(self, records: RecordSequence) -> None:
+        self.views.write_health()
 
 
 class SessionTables(Listener):
