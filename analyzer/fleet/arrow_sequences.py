@@ -102,20 +102,26 @@ class ArrowSamples:
             pc.cast(pa.array(which[kept]), pa.string()),
             _KEY_SEPARATOR,
         )
-        groups = pc.unique(key)  # in the order they first appear
-        group = pc.index_in(key, value_set=groups).to_numpy(zero_copy_only=False)
-        order = np.argsort(group, kind="stable")  # each group's rows together, in order
-        ends = np.cumsum(np.bincount(group, minlength=len(groups))).tolist()
-        table = table.take(pa.array(order))
+        groups, ends, table = _grouped(table, key)
         values = {name: table.column(name).to_pylist() for name in ("t", "seq", *fields)}
         out = []
-        for value, start, end in zip(groups.to_pylist(), [0, *ends], ends, strict=False):
+        for value, start, end in zip(groups, [0, *ends], ends, strict=False):
             bus, device, bits = value.split(_KEY_SEPARATOR.as_py())
             names = tuple(f for i, f in enumerate(fields) if int(bits) >> i & 1)
             columns = [values[name][start:end] for name in names]
             times, seqs = values["t"][start:end], values["seq"][start:end]
             out.append((bus, int(device), names, times, seqs, columns))
         return out
+
+
+def _grouped(table: pa.Table, key: pa.Array) -> tuple[list[str], list[int], pa.Table]:
+    """The distinct keys in the order they first appear, where each one's rows end, and the
+    rows with each key's together (in their order)."""
+    groups = pc.unique(key)
+    group = pc.index_in(key, value_set=groups).to_numpy(zero_copy_only=False)
+    order = np.argsort(group, kind="stable")
+    ends = np.cumsum(np.bincount(group, minlength=len(groups))).tolist()
+    return groups.to_pylist(), ends, table.take(pa.array(order))
 
 
 def _changed_bits(changed: pa.ChunkedArray, fields: Sequence[str]) -> np.ndarray:
