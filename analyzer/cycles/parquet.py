@@ -68,8 +68,14 @@ class ParquetCycles(CycleOutput):
         if not self.rows:
             return
         rows, self.rows = self.rows, []
-        columns: dict[str, list[Any]] = {key: [] for key in KEYS}
-        for cycle in rows:
-            for key, value in cycle.to_dict().items():
-                columns[key].append(value)
-        self.writer.write_table(pa.table(columns, schema=SCHEMA))
+        self.writer.write_table(cycles_table(rows))
+
+
+def cycles_table(cycles: list[Cycle]) -> pa.Table:
+    """Cycles as rows of ``SCHEMA`` (``eg2scope cycles --format parquet``'s row groups, and a
+    ``batch`` dataset's ``cycles/`` table)."""
+    columns: dict[str, list[Any]] = {key: [] for key in KEYS}
+    for cycle in cycles:
+        for key, value in cycle.to_dict().items():
+            columns[key].append(value)
+    return pa.table(columns, schema=SCHEMA)

@@ -23,6 +23,7 @@ from decoders.model import EG2_SERIAL
 from decoders.registry import detect_protocol, short_name
 
 from .. import __version__
+from ..health.rates import rates_of_capture
 from ..parquet import native as native_parquet
 from ..session import engine as native
 from ..session.capture import CaptureOptions, byte_protocol, open_reader, protocol_hint, run_capture
@@ -30,10 +31,11 @@ from ..session.stage import DETECT_BYTES
 from ..sources import sniff
 from ..sources.capture import CAPTURE_READERS, RAW_BYTES, CaptureReader, reader_for
 from ..sources.naming import BUS_BY_PROTOCOL
+from ..sources.source import CAPTURE_BATCH_ITEMS
 from ..stats import CaptureStats
 from . import layout
 from .inputs import capture_suffix, content_hash
-from .listeners import CaptureTables, Checkpoint, Progress, SessionTables, Throttled
+from .listeners import BusViews, CaptureTables, Checkpoint, Progress, SessionTables, Throttled
 from .partitions import PartitionFiles
 from .tables import COUNTS, LATENCY, STATE_COLUMNS, captures_table, utc_day
 
@@ -75,6 +77,8 @@ class CaptureResult:
     message: str = ""
     seconds: float = 0.0
     hint: str = ""  # decode's hint on a --protocol that finds fewer frames than detection
+    cycles: int = 0  # rows written to cycles/
+    health_seconds: int = 0  # rows written to health/ (one per bus and second)
 
 
 class _WriteFailed(Exception):
@@ -120,10 +124,12 @@ def _decode(
     hint = protocol_hint(opts, reader)
     files = PartitionFiles(root, digest, utc_day(stat.st_mtime))
     tables = CaptureTables(files, job.path)
+    views = BusViews(files, job.path, rates_of_capture(reader.metadata))
     try:
-        damage = _fill(opts, job.engine, reader, tables, progress, interrupted)
+        damage = _fill(opts, job.engine, reader, (tables, views), progress, interrupted)
         if interrupted():
             raise KeyboardInterrupt
+        views.write_health(final=True)
         stats = tables.summary.stats
         if damage and not stats.records:  # nothing of it could be read
             files.discard()
@@ -147,25 +153,36 @@ def _decode(
         errors=row["errors"] + row["truncated"],
         message="; ".join(damage + replaced),
         hint=hint,
+        cycles=views.cycles,
+        health_seconds=views.seconds,
     )
+
+
+#: what a capture's rows go to: its records and states, its cycles and health seconds
+Outputs = tuple[CaptureTables, BusViews]
 
 
 def _fill(
     opts: CaptureOptions,
     engine: str,
     reader: CaptureReader,
-    tables: CaptureTables,
+    outputs: Outputs,
     progress: Progress | None,
     interrupted: Callable[[], bool],
 ) -> list[str]:
-    """Decode the capture into ``tables``: on the native core where ``decode`` uses it (the
-    Python ``reader``, opened for the same checks and messages, is then closed), else in a
-    session. The damage found in the input."""
+    """Decode the capture into ``outputs``: on the native core where ``decode`` uses it (the
+    Python ``reader``, opened for the same checks and messages, is then closed; a candump
+    log's frames are read again, natively, for the bus health), else in a session. The damage
+    found in the input."""
     run = None if engine == "python" else _native_run(opts, reader)
     if run is None:
-        return _in_session(opts, reader, tables, progress, interrupted)
+        return _in_session(opts, reader, outputs, progress, interrupted)
+    frames = native.candump_frames(reader) if reader.kind == "can" else None
     reader.close()
-    return _natively(run, tables, progress, interrupted)
+    damage = _natively(run, outputs, progress, interrupted)
+    if frames is not None:  # a raw dump has no times: no health seconds
+        _frame_health(frames, outputs[1], interrupted)
+    return damage
 
 
 def _native_run(opts: CaptureOptions, reader: CaptureReader) -> Any:
@@ -186,20 +203,27 @@ def _native_run(opts: CaptureOptions, reader: CaptureReader) -> Any:
 
 
 def _natively(
-    run: Any, tables: CaptureTables, progress: Progress | None, interrupted: Callable[[], bool]
+    run: Any, outputs: Outputs, progress: Progress | None, interrupted: Callable[[], bool]
 ) -> list[str]:
-    """A native run's batches into the tables (records and samples: no object per row)."""
+    """A native run's batches into the tables (records and samples: no object per row), and
+    its grip cycles from the same columns."""
+    tables, views = outputs
     report = None if progress is None else Throttled(progress)
     try:
         for _rows, parts, states in run:
-            tables.write_parsed(native_parquet.batch_table(parts))
+            records = native_parquet.batch_table(parts)
+            tables.write_parsed(records)
+            samples = None
             if states is not None:
-                tables.add_states(native_parquet.batch_table(states[1], STATE_COLUMNS))
+                samples = native_parquet.batch_table(states[1], STATE_COLUMNS)
+                tables.add_states(samples)
+            views.add_columns(records, samples)
             if interrupted():
                 raise KeyboardInterrupt
             if report is not None:
                 report(run.position, run.records_written)
         tables.close()
+        views.close_cycles()
     except (OSError, ValueError, pa.ArrowException) as exc:  # an output, or a sample
         raise _WriteFailed(str(exc)) from None
     finally:
@@ -207,21 +231,32 @@ def _natively(
     return list(run.errors)
 
 
+def _frame_health(frames: Any, views: BusViews, interrupted: Callable[[], bool]) -> None:
+    """A candump log's frames, as the native core reads them, into the bus health."""
+    while (batch := frames.read(CAPTURE_BATCH_ITEMS)) is not None:
+        views.add_raw(batch)
+        if interrupted():
+            raise KeyboardInterrupt
+
+
 def _in_session(
     opts: CaptureOptions,
     reader: CaptureReader,
-    tables: CaptureTables,
+    outputs: Outputs,
     progress: Progress | None,
     interrupted: Callable[[], bool],
 ) -> list[str]:
     """The capture through a session (the Python decoders, or the native core's CAN decoding
     and Tracker, as any session on CAN input), its listeners filling the tables."""
+    tables, views = outputs
     output = SessionTables(tables)
     checkpoint = Checkpoint(lambda: reader.position, progress or _ignore, interrupted)
-    session, reader = run_capture(opts, [output, checkpoint], reader)
+    whole = views.listeners
+    session, reader = run_capture(opts, [output, checkpoint], reader, whole=whole)
     if session.counts.interrupted:
         raise KeyboardInterrupt
-    failed = [exc for listener, exc in session.detached if listener is output]
+    ours = [output, *whole]
+    failed = [exc for listener, exc in session.detached if listener in ours]
     if failed:
         raise _WriteFailed(str(failed[0]))
     return list(reader.errors)

@@ -1,9 +1,11 @@
-"""The fleet dataset on disk: three Parquet tables, Hive-partitioned, one file per capture and
+"""The fleet dataset on disk: five Parquet tables, Hive-partitioned, one file per capture and
 partition, named by the capture's content hash.
 
 ```
 fleet/records/day=2026-11-20/bus=can0/<hash>.parquet    every record (decode --format parquet)
 fleet/states/day=2026-11-20/bus=can0/<hash>.parquet     every state sample
+fleet/cycles/day=2026-11-20/bus=can0/<hash>.parquet     every grip cycle (cycles --format parquet)
+fleet/health/day=2026-11-20/bus=can0/<hash>.parquet     each bus's health, one row per second
 fleet/captures/day=2026-11-20/<hash>.parquet            one row per capture, written last
 ```
 
@@ -28,8 +30,12 @@ from ..outfile import OutputError
 
 RECORDS: Final = "records"
 STATES: Final = "states"
+CYCLES: Final = "cycles"
+HEALTH: Final = "health"
 CAPTURES: Final = "captures"
-TABLES: Final = (RECORDS, STATES, CAPTURES)
+#: the tables partitioned by day and bus, then the one of the captures (the commit)
+BUS_TABLES: Final = (RECORDS, STATES, CYCLES, HEALTH)
+TABLES: Final = (*BUS_TABLES, CAPTURES)
 OPTIONS: Final = "decode_options"  # in a captures/ row: with the content hash, its key
 LOCK_NAME: Final = ".eg2scope-batch.lock"
 _TEMP_MARK: Final = ".tmp-"
@@ -74,8 +80,7 @@ def held_options(root: Path, content_hash: str) -> str | None:
 def capture_files(root: Path, content_hash: str) -> list[Path]:
     """Every file of one capture in the dataset, its ``captures/`` row last."""
     name = f"{content_hash}.parquet"
-    found = [*(root / RECORDS).glob(f"day=*/bus=*/{name}")]
-    found += (root / STATES).glob(f"day=*/bus=*/{name}")
+    found = [path for table in BUS_TABLES for path in (root / table).glob(f"day=*/bus=*/{name}")]
     found += (root / CAPTURES).glob(f"day=*/{name}")
     return found
 

@@ -18,8 +18,9 @@ _KEY_SEPARATOR = pa.scalar("\x00", pa.string())
 
 
 class PartitionFiles:
-    """Tables with ``t`` and ``bus`` columns in, split by UTC day and bus, streamed into one
-    Parquet file per partition (row groups as they fill: memory stays flat)."""
+    """Tables with a time column (``t``, or the one ``add`` names) and a ``bus`` column in,
+    split by UTC day and bus, streamed into one Parquet file per partition (row groups as they
+    fill: memory stays flat)."""
 
     def __init__(self, root: Path, content_hash: str, fallback_day: str) -> None:
         self.root = root
@@ -32,10 +33,11 @@ class PartitionFiles:
     def buses(self) -> list[str]:
         return sorted({bus for table, _, bus in self.writers if table == layout.RECORDS})
 
-    def add(self, table_name: str, schema: pa.Schema, table: pa.Table) -> None:
+    def add(self, table_name: str, schema: pa.Schema, table: pa.Table, time: str = "t") -> None:
+        """``table``'s rows into their partitions, each row's day from its ``time`` (seconds)."""
         if not table.num_rows:
             return
-        day = days(table.column("t"), self.fallback_day)
+        day = days(table.column(time), self.fallback_day)
         if self.first_day is None and table_name == layout.RECORDS:
             self.first_day = day if isinstance(day, str) else day[0].as_py()
         bus = table.column(BUS)

@@ -1,5 +1,6 @@
 """What a batch run shows: a progress bar on stderr (captures done, bytes read, records, rate,
-errors) while it runs, one line per capture that went wrong, and a summary table at the end."""
+errors) while it runs, one line per capture that went wrong, and a summary at the end: a table
+of the captures, then the records, grip cycles and bus health seconds written, and the tables."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from rich.progress import (
 from rich.table import Table
 
 from ..lifecycle import Running
+from . import layout
 from .capture_task import DAMAGED, DONE, FAILED, SKIPPED, UNREADABLE, CaptureResult
 from .runner import Tally
 
@@ -127,4 +129,8 @@ def print_summary(tally: Tally, root: str) -> None:
     console.print(
         f"{tally.records:,} records ({tally.frames:,} frames, {tally.errors:,} errors) "
         f"in {seconds:.1f} s: {rate:,.0f} records/s"
+    )
+    console.print(
+        f"grip cycles: {tally.cycles:,}, bus health seconds: {tally.health_seconds:,}; "
+        f"tables: {', '.join(f'{name}/' for name in layout.TABLES)}"
     )

@@ -199,12 +199,16 @@ class Tally:
         self.records = 0
         self.frames = 0
         self.errors = 0
+        self.cycles = 0
+        self.health_seconds = 0
 
     def add(self, result: CaptureResult) -> None:
         self.results.append(result)
         self.records += result.records
         self.frames += result.frames
         self.errors += result.errors
+        self.cycles += result.cycles
+        self.health_seconds += result.health_seconds
 
     def count(self, *statuses: str) -> int:
         return sum(r.status in statuses for r in self.results)

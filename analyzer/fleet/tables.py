@@ -32,14 +32,15 @@ FLOAT: Final = pa.float64()
 STR: Final = pa.string()
 STRINGS: Final = pa.list_(STR)
 
-_SOURCE: Final = [
+#: the columns that say which capture a row came from, last in every bus table
+SOURCE_FIELDS: Final = [
     described_field(PATH, STR, description="the capture file, as given to eg2scope batch"),
     described_field(HASH, STR, description="sha256 of the capture file's bytes"),
 ]
 
 #: records/: the columns of ``decode --format parquet`` (bus in the folder name) and the source
 RECORDS_SCHEMA: Final = pa.schema(
-    [f for f in RECORD_SCHEMA if f.name != BUS] + _SOURCE,
+    [f for f in RECORD_SCHEMA if f.name != BUS] + SOURCE_FIELDS,
     metadata={b"eg2scope": b"fleet records"},
 )
 
@@ -74,7 +75,7 @@ STATES_SCHEMA: Final = pa.schema(
         described_field("errors", INT),
         described_field("unanswered", INT),
         described_field("changed", STRINGS, description="the fields this record set"),
-        *_SOURCE,
+        *SOURCE_FIELDS,
     ],
     metadata={b"eg2scope": b"fleet states"},
 )
@@ -232,8 +233,8 @@ def _words(
 
 def with_source(table: pa.Table, path: str, content_hash: str) -> pa.Table:
     rows = table.num_rows
-    table = table.append_column(_SOURCE[0], _repeated(path, rows))
-    return table.append_column(_SOURCE[1], _repeated(content_hash, rows))
+    table = table.append_column(SOURCE_FIELDS[0], _repeated(path, rows))
+    return table.append_column(SOURCE_FIELDS[1], _repeated(content_hash, rows))
 
 
 _REPEATED: dict[str, pa.Array] = {}

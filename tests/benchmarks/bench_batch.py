@@ -8,8 +8,8 @@ Per capture (issue 18: batch costs at most 1.5 times ``decode --format parquet``
 of ``--frames`` frames of each kind (realistic moving grippers): a candump log, a raw serial
 dump, a raw Modbus dump, python-can .asc and .blf logs, an eg2scope MCAP recording of a CAN
 bus. Each round runs, side by side, the real CLI's ``decode FILE --format parquet -o X`` and
-``batch FILE -o D --workers 1`` (a fresh dataset: records, states and the captures row); the
-ratio of the medians of ``--runs`` rounds is printed.
+``batch FILE -o D --workers 1`` (a fresh dataset: records, states, grip cycles, bus health
+seconds and the captures row); the ratio of the medians of ``--runs`` rounds is printed.
 
 Folder (issue 11): ``--captures`` captures of ``--frames / 4`` frames (candump logs, raw serial
 and raw Modbus dumps in turn) in one folder:
