@@ -19,6 +19,7 @@ import can
 import pytest
 from native_core import require_native
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
+from health_checks import check_bus_health
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
 from analyzer.model import StateSample
@@ -60,7 +61,7 @@ def plot(path: Path, out: Path, engine: str = "python") -> tuple[Collector, Rrd]
     collector = Collector()
     listener = RerunListener(str(out))
     opts = CaptureOptions(str(path), progress=False, engine=engine)
-    session, _ = run_capture(opts, [collector, listener])
+    session, _ = run_capture(opts, [collector, listener, collector.health])
     assert not session.detached
     return collector, read_rrd(out)
 
@@ -162,7 +163,7 @@ def test_every_state_sample_is_plotted_with_its_time_seq_and_value(
         for p, e in rrd.entities.items()
         if p.count("/") >= 3
         and p.split("/")[2].isdigit()
-        and not p.endswith(("commands", "faults"))
+        and not p.endswith(("commands", "faults", "cycles", "cycles/log"))
         and e.values
     }
     assert gripper_entities == set(expected), "no entity without a sample behind it"
@@ -205,7 +206,8 @@ def test_two_timelines_and_no_sdk_timelines(plotted: Plotted, name: str, engine:
     if name in TIMED:
         assert rrd.timelines() == {"capture_time", "frame"}
         for path, e in data.items():
-            want = {"capture_time"} if "_per_s" in path else {"capture_time", "frame"}
+            seconds = "/health/" in path and not path.endswith("latency_ms")  # per second
+            want = {"capture_time"} if seconds else {"capture_time", "frame"}
             assert e.timelines == want, path
     else:  # a raw dump carries no time: the frame timeline only
         assert rrd.timelines() == {"frame"}
@@ -236,7 +238,11 @@ def test_a_view_for_every_quantity_the_capture_carries_and_none_other(
     collector, rrd = plotted[name, engine]
     shown = views(rrd)
     drawn = {e for v in shown if v.kind != "TextLog" for e in v.entities}
-    gripper_rows = {e for e in drawn if e.split("/")[2].isdigit() and "faults" not in e}
+    gripper_rows = {
+        e
+        for e in drawn
+        if e.split("/")[2].isdigit() and "faults" not in e and not e.endswith("/cycles")
+    }
     assert gripper_rows == set(expected_series(collector.samples))
     grippers = {(s.bus, s.device) for s in collector.samples if set(s.changed) & PLOTTED}
     titled = {v.name.split(":")[0] for v in shown if v.kind != "TextLog" and " ID " in v.name}
@@ -392,16 +398,19 @@ def test_commands_in_words_without_the_polls(plotted: Plotted, name: str, engine
 def test_bus_health_counts_every_frame_error_and_latency(
     plotted: Plotted, name: str, engine: str
 ) -> None:
+    """Frames, errors and the load per second are the bus health's (what ``stats`` reports);
+    unanswered requests and latencies come from the records."""
     collector, rrd = plotted[name, engine]
+    buses = collector.health.buses()
+    assert {b["bus"] for b in buses} == {r.bus for r in collector.records if r.t is not None}
+    for figures in buses:
+        check_bus_health(rrd, figures)
     for bus in {r.bus for r in collector.records if r.t is not None}:
         timed = [r for r in collector.records if r.t is not None and r.bus == bus]
         frames = rrd[f"/{bus}/health/frames_per_s"]
-        assert sum(frames.values) == sum(1 for r in timed if r.kind == FRAME)
-        errors = rrd[f"/{bus}/health/errors_per_s"].values
-        assert sum(errors) == sum(1 for r in timed if r.errors)
         unanswered = sum(1 for r in timed if UNANSWERED in r.flags)
         assert sum(rrd[f"/{bus}/health/unanswered_per_s"].values) == unanswered
-        seconds = sorted({math.floor(r.t) for r in timed if r.t is not None})
+        seconds = sorted({math.floor(r.t) for r in timed if r.kind == FRAME and not r.errors})
         ends = [t / 1e9 for t, v in zip(frames.capture_time, frames.values, strict=True) if v]
         last = max(r.t for r in timed if r.t is not None)
         # one point at the end of each second; the last, partial one at the last record
@@ -552,7 +561,12 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
     shown = views(rrd)  # the blueprint grew with the data: a view for each quantity polled
     assert all(v.entities for v in shown)
     assert {v.name for v in shown} >= {"can0 ID 1: force", "can0 ID 1: current"}
-    assert not any("state" in v.name for v in shown)  # 1128 was never polled
+    assert not any(" ID " in v.name and "state" in v.name for v in shown)  # 1128 never polled
+    # the bus health, as each second ended: one view per unit
+    health = {v.name: v.entities for v in shown if "bus health" in v.containers}
+    assert health["bus load (%)"] == ["/can0/health/load_pct"]
+    assert health["CAN controller state"] == ["/can0/health/state"]
+    assert rrd["/can0/health/state"].values == ["error_active"]
 
 
 def test_live_on_a_serial_pty(tmp_path: Path) -> None:
@@ -581,7 +595,7 @@ def test_live_on_a_serial_pty(tmp_path: Path) -> None:
     # only the opening was read: no other plot of the gripper (a loaded machine may split a
     # frame, so the error log may or may not be there)
     assert {n for n in names if n.startswith("rs232 ID 1")} == {"rs232 ID 1: opening (mm)"}
-    assert {"rs232 frames, errors, unanswered per s", "rs232 latency (ms)"} <= names
+    assert {"frames, errors, unanswered per s", "latency (ms)"} <= names
     assert all(v.entities for v in shown)
     assert Counter(s.bus for s in collector.samples) == Counter({"rs232": 24})
 
