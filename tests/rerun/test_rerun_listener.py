@@ -17,9 +17,9 @@ from typing import Any
 
 import can
 import pytest
+from health_checks import check_bus_health
 from native_core import require_native
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
-from health_checks import check_bus_health
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
 from analyzer.model import StateSample
