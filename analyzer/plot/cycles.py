@@ -5,7 +5,9 @@ rules are ``analyzer/cycles/``'s alone). Per gripper, under ``/<bus>/<device>/``
   ``start_seq``) to the frame it ended at, named and coloured by its outcome
   (``analyzer/cycles/looks.py``). A span ends with an empty state, a gap in the lane, where no
   cycle begins at the same frame (after a stop, at the end of the capture); that is known once
-  the gripper's next cycle ends, or at the end;
+  the gripper's next cycle ends, or at the end. (A cycle ended at its own command, cut off
+  there by the end of the capture, gets no gap: it would hide the cycle.) Two rows of one
+  entity never share a frame, so what the lane shows never rests on the order of equal times;
 - ``cycles/log``: a ``TextLog`` line at the command (the command, the outcome and every figure
   of the cycle) and one at its end, at the level of the outcome's severity.
 
@@ -31,7 +33,7 @@ GAP: Final = ""  # the empty state: Rerun's lane shows no state until the next
 
 class GripperCycles:
     """One gripper's cycle lane and log; ``end``: the (t, seq) its last cycle ended at, whose
-    gap waits for the next cycle (which may begin there)."""
+    gap waits for the next cycle (which may begin there); None: no gap to come."""
 
     __slots__ = ("end", "lane", "log")
 
@@ -48,7 +50,7 @@ class GripperCycles:
         self.lane.add(c.start_t, c.start_seq, shown_as(c))
         self.log.add(c.start_t, c.start_seq, start_text(c), level)
         self.log.add(c.end_t, c.end_seq, end_text(c), level)
-        self.end = (c.end_t, c.end_seq)
+        self.end = (c.end_t, c.end_seq) if c.end_seq != c.start_seq else None
 
     def close(self) -> None:
         if self.end is not None:

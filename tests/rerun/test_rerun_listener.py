@@ -17,8 +17,8 @@ from typing import Any
 
 import can
 import pytest
-from health_checks import check_bus_health
 from native_core import require_native
+from plot_checks import check_bus_health
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
