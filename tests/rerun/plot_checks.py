@@ -73,8 +73,13 @@ def plotted_cycles(rrd: Rrd) -> list[dict[str, Any]]:
     return out
 
 
-def check_cycles(rrd: Rrd, cycles: list[dict[str, Any]]) -> None:
-    """The plot's lanes and logs hold exactly ``cycles`` (``cycles --format jsonl``)."""
+def check_cycles(
+    rrd: Rrd, cycles: list[dict[str, Any]], slack_ns: int = 0, live: bool = False
+) -> None:
+    """The plot's lanes and logs hold exactly ``cycles`` (``cycles --format jsonl``): the same
+    frames and outcomes, at the same times. ``live``: a live session's plot against its
+    recording's replay, which numbers the records its own way (frames not compared) and times
+    a serial frame within ``slack_ns`` of the live one."""
     lanes = lane_rows(rrd)
     assert set(lanes) == {(c["bus"], c["device"]) for c in cycles}
     for key, rows in lanes.items():
@@ -83,8 +88,11 @@ def check_cycles(rrd: Rrd, cycles: list[dict[str, Any]]) -> None:
         starts = {c["start_seq"] for c in mine}
         want = [(c["start_seq"], ns(c["start_t"]), shown_as(c)) for c in mine]
         want += [(c["end_seq"], ns(c["end_t"]), "") for c in mine if c["end_seq"] not in starts]
-        assert sorted(rows, key=_order) == sorted(want, key=_order), key
-        _check_log(rrd, key, mine)
+        got, want = sorted(rows, key=_order), sorted(want, key=_order)
+        seen = [v for _, _, v in got] if live else [(f, v) for f, _, v in got]
+        assert seen == ([v for _, _, v in want] if live else [(f, v) for f, _, v in want]), key
+        assert all(_near(t, u, slack_ns) for (_, t, _), (_, u, _) in zip(got, want, strict=True))
+        _check_log(rrd, key, mine, slack_ns, live)
     static = next(iter(lanes)) if lanes else None
     if static is not None:
         config = rrd[f"/{static[0]}/{static[1]}/cycles"].static
@@ -94,11 +102,17 @@ def check_cycles(rrd: Rrd, cycles: list[dict[str, Any]]) -> None:
         assert (colors["faulted"], colors["unfinished"]) == (RED, GREY)
 
 
+def _near(t: int | None, u: int | None, slack_ns: int) -> bool:
+    return t == u if t is None or u is None else abs(t - u) <= slack_ns
+
+
 def _order(row: tuple[int | None, int | None, str]) -> tuple[int, str]:
     return (row[0] if row[0] is not None else -1, row[2])
 
 
-def _check_log(rrd: Rrd, key: tuple[str, int], mine: list[dict[str, Any]]) -> None:
+def _check_log(
+    rrd: Rrd, key: tuple[str, int], mine: list[dict[str, Any]], slack_ns: int, live: bool
+) -> None:
     """A line at each command with the cycle's figures, one at its end; the outcome's level."""
     log = rrd[f"/{key[0]}/{key[1]}/cycles/log"]
     rows = sorted(zip(log.frame, log.capture_time, log.values, log.levels, strict=True),
@@ -111,17 +125,18 @@ def _check_log(rrd: Rrd, key: tuple[str, int], mine: list[dict[str, Any]]) -> No
     want.sort(key=lambda w: (w[0], w[4]))
     assert len(rows) == len(want), key
     for (frame, t, text, level), (seq, t_want, c, level_want, end) in zip(rows, want, strict=True):
-        assert (frame, t, level) == (seq, t_want, level_want), (key, text)
+        assert level == level_want and _near(t, t_want, slack_ns), (key, text)
+        assert live or frame == seq, (key, text)
         if end:
             assert text.startswith("end of cycle: ") and c["command"] in text, text
             continue
         assert text.startswith(f"{c['command']}: "), text
-        figures = [f"frames {c['start_seq']}-{c['end_seq']}"]
+        figures = [] if live else [f"frames {c['start_seq']}-{c['end_seq']}"]
         if c["width_mm"] is not None:
             figures.append(f"width {c['width_mm']} mm")
         if c["force_peak"] is not None:
             figures.append(f"force peak {c['force_peak']}")
-        if c["time_to_contact_ms"] is not None:
+        if c["time_to_contact_ms"] is not None and not slack_ns:  # (times: within the slack)
             figures.append(f"contact {c['time_to_contact_ms']:.1f} ms")
         assert all(f in text for f in figures), (text, figures)
 

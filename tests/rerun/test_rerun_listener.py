@@ -12,6 +12,7 @@ import threading
 import time
 import tty
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +23,11 @@ from plot_checks import check_bus_health
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
+from analyzer.health.rates import BusRates
+from analyzer.health.seconds import HealthSecond
 from analyzer.model import StateSample
 from analyzer.plot.blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
+from analyzer.plot.health import BusHealthColumns
 from analyzer.plot.listener import RerunListener
 from analyzer.session.batches import RecordSequence, SampleSequence
 from analyzer.session.capture import CaptureOptions, run_capture
@@ -538,6 +542,11 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
 
     def feed() -> None:
         with can.Bus(interface="virtual", channel=channel) as sender:
+            for f in (  # a motion command: the target opening written
+                b.can_write_request(1, 1020, b.u16le(410)),
+                b.can_write_response(1, 1020, 2),
+            ):
+                sender.send(can.Message(arbitration_id=f.arbitration_id, data=f.data))
             for i in range(60):
                 opening = 1000 - 10 * i
                 for f in (
@@ -561,12 +570,18 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
     shown = views(rrd)  # the blueprint grew with the data: a view for each quantity polled
     assert all(v.entities for v in shown)
     assert {v.name for v in shown} >= {"can0 ID 1: force", "can0 ID 1: current"}
-    assert not any(" ID " in v.name and "state" in v.name for v in shown)  # 1128 never polled
+    lanes = {v.name: v.entities for v in shown if v.kind == "StateTimeline"}
+    assert lanes["can0 ID 1: cycles, state"] == ["/can0/1/cycles"]  # 1128 was never polled
     # the bus health, as each second ended: one view per unit
     health = {v.name: v.entities for v in shown if "bus health" in v.containers}
     assert health["bus load (%)"] == ["/can0/health/load_pct"]
     assert health["CAN controller state"] == ["/can0/health/state"]
     assert rrd["/can0/health/state"].values == ["error_active"]
+    # the grip cycle the write began, on its gripper's lane at the write's seq, as it ended
+    (write,) = [r for r in collector.records if r.direction == REQUEST and r.code == 1]
+    lane = rrd["/can0/1/cycles"]
+    assert lane.frame[0] == write.seq and lane.values[0]
+    assert rrd["/can0/1/cycles/log"].values[0].startswith("move to 28.7 mm: ")
 
 
 def test_live_on_a_serial_pty(tmp_path: Path) -> None:
@@ -665,3 +680,18 @@ def test_a_live_listener_flushes_on_its_timer_while_the_session_is_busy(tmp_path
     assert flushes[1] == "rerun-flush"
     rows = read_rrd(tmp_path / "timer.rrd")["/can0/1/force/measured"].rows()
     assert [(frame, value) for _, frame, value in rows] == [(1, 10), (2, 11)]
+
+
+def test_a_serial_second_handed_out_in_two_parts_is_plotted_once() -> None:
+    """A serial line's second counted from its reads, then from records that came later: one
+    point, plotted once the records have passed the second, the parts added up."""
+    columns = BusHealthColumns("rs485", 0, BusRates())
+    first = HealthSecond("rs485", "serial", 100, 3, 300, round(300 / 1152, 3), 0, None, None)
+    columns.add([first], 100.0, 100.9, final=False)  # the records are still in second 100
+    assert not columns.series["frames_per_s"].values
+    more = replace(first, frames=2, bits=200, load_pct=round(200 / 1152, 3), errors=1)
+    columns.add([more], 100.0, 101.2, final=False)
+    assert list(columns.series["frames_per_s"].values) == [5.0]
+    assert list(columns.series["errors_per_s"].values) == [1.0]
+    assert list(columns.series["load_pct"].values) == [round(500 / 1152, 3)]
+    assert list(columns.series["load_pct"].t) == [101.0]
