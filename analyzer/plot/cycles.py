@@ -46,10 +46,11 @@ class GripperCycles:
     def add(self, c: Cycle) -> None:
         if self.end is not None and self.end[1] != c.start_seq:
             self.lane.add(*self.end, GAP)
-        level = LEVELS[LOOKS[shown_as(c)].severity]
-        self.lane.add(c.start_t, c.start_seq, shown_as(c))
-        self.log.add(c.start_t, c.start_seq, start_text(c), level)
-        self.log.add(c.end_t, c.end_seq, end_text(c), level)
+        shown = shown_as(c)
+        label, level = LOOKS[shown].label, LEVELS[LOOKS[shown].severity]
+        self.lane.add(c.start_t, c.start_seq, shown)
+        self.log.add(c.start_t, c.start_seq, start_text(c, label), level)
+        self.log.add(c.end_t, c.end_seq, end_text(c, label), level)
         self.end = (c.end_t, c.end_seq) if c.end_seq != c.start_seq else None
 
     def close(self) -> None:
@@ -83,12 +84,13 @@ class RerunCycles(CycleOutput):
         return [c for g in self.grippers.values() for c in (g.lane, g.log)]
 
 
-def start_text(c: Cycle) -> str:
-    """The line at a cycle's command: what was asked, how it ended, what was measured."""
-    return f"{c.command}: {LOOKS[shown_as(c)].label} [{', '.join(details(c))}]"
+def start_text(c: Cycle, label: str) -> str:
+    """The line at a cycle's command: what was asked, how it ended (``label``), what was
+    measured."""
+    return f"{c.command}: {label} [{', '.join(details(c))}]"
 
 
-def end_text(c: Cycle) -> str:
+def end_text(c: Cycle, label: str) -> str:
     """The line at the frame a cycle ended at."""
     took = "" if c.duration_ms is None else f" after {c.duration_ms:.1f} ms"
-    return f"end of cycle: {LOOKS[shown_as(c)].label}{took} ({c.command})"
+    return f"end of cycle: {label}{took} ({c.command})"

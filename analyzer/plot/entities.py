@@ -49,7 +49,10 @@ CYCLES: Final = "cycles"  # a gripper's cycle lane
 CYCLE_LOG: Final = f"{CYCLES}/log"  # ... and its log
 # under /<bus>/health/: the load, the rates, the latencies, the CAN controller's state
 LOAD: Final = "load_pct"
-RATES: Final = ("frames_per_s", "errors_per_s", "unanswered_per_s")
+FRAMES_PER_S: Final = "frames_per_s"
+ERRORS_PER_S: Final = "errors_per_s"
+UNANSWERED_PER_S: Final = "unanswered_per_s"
+RATES: Final = (FRAMES_PER_S, ERRORS_PER_S, UNANSWERED_PER_S)
 LATENCY: Final = "latency_ms"
 CONTROLLER: Final = "state"
 
@@ -113,9 +116,9 @@ LANES: Final = {"state": STATE, "fault": FAULT}
 BUS_COLORS: Final = (0x1F77B4FF, 0x2CA02CFF, 0x9467BDFF, 0x8C564BFF, 0x17BECFFF, 0x7F7F7FFF)
 HEALTH_SERIES: Final = {
     LOAD: ("load %", BUS_COLORS),
-    "frames_per_s": ("frames/s", BUS_COLORS),
-    "errors_per_s": ("errors/s", (0xE3000BFF, 0xF46D43FF, 0xA50026FF, 0xFDAE61FF)),
-    "unanswered_per_s": ("unanswered/s", (0xFF7F0EFF, 0xFDB863FF, 0xB35806FF, 0xFEE0B6FF)),
+    FRAMES_PER_S: ("frames/s", BUS_COLORS),
+    ERRORS_PER_S: ("errors/s", (0xE3000BFF, 0xF46D43FF, 0xA50026FF, 0xFDAE61FF)),
+    UNANSWERED_PER_S: ("unanswered/s", (0xFF7F0EFF, 0xFDB863FF, 0xB35806FF, 0xFEE0B6FF)),
     LATENCY: ("latency (ms)", BUS_COLORS),
 }
 # the CAN controller's states (health.seconds.STATES), the worst last

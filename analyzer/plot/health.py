@@ -31,8 +31,8 @@ from .columns import LANE, SCALAR, Columns
 # what each plotted series takes of a second
 _FIGURES: Final = {
     ent.LOAD: lambda row: row.load_pct,
-    "frames_per_s": lambda row: row.frames,
-    "errors_per_s": lambda row: row.errors,
+    ent.FRAMES_PER_S: lambda row: row.frames,
+    ent.ERRORS_PER_S: lambda row: row.errors,
 }
 
 

@@ -94,9 +94,11 @@ def _capture_listener(
 
 class UnreadCapture(Listener):
     """A capture from which nothing at all could be read gets no plot (no .rrd file); a
-    damaged one that yielded anything keeps its plot."""
+    damaged one that yielded anything keeps its plot. It only counts the raw items, so a
+    candump log is still read natively (a native ``FrameBatch`` has a length too)."""
 
     wants_raw = True
+    reads_frame_batches = True
 
     def __init__(self, reader: CaptureReader, output: Any) -> None:
         self.reader = reader

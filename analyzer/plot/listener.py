@@ -66,7 +66,6 @@ MAX_ROWS: Final = 40_000
 _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ERROR"}
 # the state fields plotted, in the order their entities are sent
 _PLOTTED: Final = (*(s.field for s in ent.SERIES), *ent.LANES)
-UNANSWERED: Final = "unanswered_per_s"
 
 
 def _runs(buses: list[str]) -> list[tuple[str, int, int]]:
@@ -220,9 +219,9 @@ class _Bus:
             f"{health}/{ent.LATENCY}", SCALAR, ent.health_style(ent.LATENCY, bus, index)
         )
         self.unanswered_per_s = Columns(
-            f"{health}/{UNANSWERED}",
+            f"{health}/{ent.UNANSWERED_PER_S}",
             SCALAR,
-            ent.health_style(UNANSWERED, bus, index),
+            ent.health_style(ent.UNANSWERED_PER_S, bus, index),
             frame=False,
         )
         self.health = BusHealthColumns(bus, index, rates)
