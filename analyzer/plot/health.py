@@ -38,7 +38,8 @@ _FIGURES: Final = {
 
 class BusHealthColumns:
     """One bus's health series waiting to be sent. ``index``: the bus's place (its colours);
-    ``highest_rate``: the most frames in a second so far (the rates' y range)."""
+    ``highest_rate``, ``highest_load``: the most frames or errors in a second so far, the
+    highest load (the y ranges of the views)."""
 
     def __init__(self, bus: str, index: int, rates: BusRates) -> None:
         base = f"{ent.bus_path(bus)}/{ent.HEALTH}"
@@ -91,7 +92,7 @@ class BusHealthColumns:
         for name, figure in _FIGURES.items():
             values = [figure(r) for r in rows]
             if name == ent.LOAD and None in values:
-                continue  # untimed: no load
+                continue  # no rate to count it at: no load
             column = self.series[name]
             column.t.extend(t[order].tolist())
             column.values.extend(np.concatenate([values, np.zeros(len(zeros))])[order].tolist())
