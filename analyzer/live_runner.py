@@ -231,9 +231,11 @@ def _outputs(
     if options.output:
         listeners.append(recorder(options.output, taps))
     if options.rerun is not None:  # Rerun is imported only when it is asked for
+        from .health.rates import rates_of_capture
         from .plot.listener import rerun_listener
 
-        rerun = rerun_listener(options.rerun, source=options.output)
+        rates = rates_of_capture(metadata(taps))  # each tap's own rate
+        rerun = rerun_listener(options.rerun, source=options.output, rates=rates)
         listeners += [] if rerun is None else [rerun]
     return listeners
 

@@ -24,8 +24,12 @@ def add_subparser(sub: Any) -> None:
         "plot",
         help="plot force, opening, state and errors of every gripper in Rerun",
         description=(
-            "Plot what each gripper's opening, force, current, temperature and state did, and "
-            "the controller's commands and the bus's errors, on one clock in Rerun: from any "
+            "Plot what each gripper's opening, force, current, temperature and state did, its "
+            "grip cycles (a lane coloured by outcome, their figures in a log), the controller's "
+            "commands, the bus's errors and each bus's health second by second (load %, "
+            "frames, errors and unanswered requests per second, the CAN controller's state; "
+            "the load at the rate a recording or a live tap gives, else the EG2's), on one "
+            "clock in Rerun: from any "
             "capture 'decode' reads or an eg2scope .mcap recording, or live from a bus. Every "
             "reading is plotted (nothing is downsampled), on the timelines capture_time and "
             "frame (the record's seq, as the TUI and the recording number it). By default the "

@@ -1,8 +1,11 @@
 """The default Rerun blueprint of a session: a view only for what the session carries.
 
 Per gripper, two pages: force (with its limit and the fault marks), opening (with its target)
-and the state lanes; then current and temperature. Per bus: the error log, the commands, the
-health rates and the latencies. Above four grippers, one tab per bus. A view exists only when
+and the lanes (its grip cycles, run state, faults); then current and temperature. Per bus: the
+error log, the commands, the cycles' log. The bus health of every bus together, a view per unit:
+the loads (%), the rates (frames, errors, unanswered requests per second), the CAN controllers'
+state lanes, the latencies (ms). Above four grippers, one tab per bus (and one for the bus
+health). A view exists only when
 an entity it shows has rows (``Layout.paths``), so no plot is empty: an RS232 dump has no
 measured force or current, a CAN demo polls no current, a gripper that never answered has no
 column.
@@ -41,6 +44,11 @@ OPENING_MM: Final = (0.0, 70.0)  # the stroke: opening 0-1000 is 0-70 mm
 
 MOTION_PAGE: Final = "force, opening, state"
 ELECTRIC_PAGE: Final = "current, temperature"
+HEALTH_PAGE: Final = "bus health"
+# the y ranges of the health views that show every bus (keys of ``Layout.ceilings``)
+LOAD_PLOT: Final = "health: load"
+RATES_PLOT: Final = "health: rates"
+LATENCY_PLOT: Final = "health: latency"
 
 
 @dataclass(frozen=True)
@@ -108,8 +116,11 @@ def blueprint(layout: Layout) -> rrb.Blueprint:
     panels = (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
     root: Any = None
     if len(layout.grippers) > MAX_COLUMNS:
-        pages = [p for p in (_page(layout, [bus], bus) for bus in layout.buses) if p is not None]
+        pages = [p for p in (_page(layout, [bus], bus, health=False) for bus in layout.buses) if p]
         if len(pages) > 1:
+            health = _health(layout, list(layout.buses))
+            if health is not None:
+                pages.append(health)
             if ent.SESSION_ERRORS in layout.paths:
                 pages.append(_session_log())
             root = rrb.Tabs(*pages, name="buses")
@@ -152,9 +163,11 @@ def _shared_range(layout: Layout) -> rr.TimeRange | None:
 # -- pages ---------------------------------------------------------------------------------------
 
 
-def _page(layout: Layout, buses: list[str], name: str, session: bool = False) -> Any | None:
-    """The grippers of ``buses`` above their logs (and the session's, if asked); None when
-    there is nothing to show."""
+def _page(
+    layout: Layout, buses: list[str], name: str, session: bool = False, health: bool = True
+) -> Any | None:
+    """The grippers of ``buses`` above their logs and (``health``) their bus health (and the
+    session's log, if asked); None when there is nothing to show."""
     grippers = [key for key in layout.grippers if key[0] in buses]
     tops = [
         (page, [c for c in (make(layout, *key) for key in grippers) if c is not None])
@@ -162,6 +175,9 @@ def _page(layout: Layout, buses: list[str], name: str, session: bool = False) ->
     ]
     pages = [rrb.Horizontal(*columns, name=page) for page, columns in tops if columns]
     logs: list[Any] = [t for t in (_bus_logs(layout, bus) for bus in buses) if t is not None]
+    views = _health(layout, buses) if health else None
+    if views is not None:
+        logs.append(views)
     if session and ent.SESSION_ERRORS in layout.paths:
         logs.append(_session_log())
     parts: list[Any] = []
@@ -193,17 +209,9 @@ def _motion_column(layout: Layout, bus: str, device: int) -> rrb.Vertical | None
         origin = f"{base}/{ent.OPENING}"
         views.append(_plot(layout, opening, origin, f"{title}: opening (mm)", legend=True))
         shares.append(2.0)
-    lanes = _present(layout, base, tuple(ent.LANES.values()))
+    lanes = _present(layout, base, (ent.CYCLES, *ent.LANES.values()))
     if lanes:
-        views.append(
-            rrb.StateTimelineView(
-                origin=base,
-                contents=lanes,
-                name=f"{title}: state",
-                time_view=_time_axis(),
-                time_ranges=_window(layout),
-            )
-        )
+        views.append(_lanes(layout, lanes, base, f"{title}: cycles, state"))
         shares.append(1.0 if views[:-1] else 2.0)
     if not views:
         return None
@@ -232,25 +240,64 @@ def _bus_logs(layout: Layout, bus: str) -> rrb.Tabs | None:
     )
     if commands:
         views.append(rrb.TextLogView(origin=base, contents=commands, name=f"{bus} commands"))
-    health = f"{base}/{ent.HEALTH}"
-    rates = [f"{health}/{name}" for name in ent.RATES if layout.has(f"{health}/{name}")]
-    if rates:
-        views.append(_plot(layout, rates, health, f"{bus} frames, errors, unanswered per s", True))
-    latency = f"{health}/{ent.LATENCY}"
-    if layout.has(latency):
-        views.append(_plot(layout, [latency], latency, f"{bus} latency (ms)"))
+    cycles = sorted(
+        p for p in layout.paths if p.startswith(f"{base}/") and p.endswith(f"/{ent.CYCLE_LOG}")
+    )
+    if cycles:
+        views.append(rrb.TextLogView(origin=base, contents=cycles, name=f"{bus} cycles"))
     return rrb.Tabs(*views, name=bus) if views else None
+
+
+def _health(layout: Layout, buses: list[str]) -> rrb.Tabs | None:
+    """The health of ``buses``, one view per unit, each showing every bus: the loads (%), the
+    rates (per second), the CAN controllers' state lanes, the latencies (ms)."""
+    bases = [f"{ent.bus_path(bus)}/{ent.HEALTH}" for bus in buses]
+
+    def present(*names: str) -> list[str]:
+        return [f"{b}/{n}" for n in names for b in bases if layout.has(f"{b}/{n}")]
+
+    views: list[Any] = []
+    load = present(ent.LOAD)
+    if load:
+        views.append(_plot(layout, load, "/", "bus load (%)", True, LOAD_PLOT))
+    rates = present(*ent.RATES)
+    if rates:
+        name = "frames, errors, unanswered per s"
+        views.append(_plot(layout, rates, "/", name, True, RATES_PLOT))
+    states = present(ent.CONTROLLER)
+    if states:
+        views.append(_lanes(layout, states, "/", "CAN controller state"))
+    latency = present(ent.LATENCY)
+    if latency:
+        views.append(_plot(layout, latency, "/", "latency (ms)", True, LATENCY_PLOT))
+    return rrb.Tabs(*views, name=HEALTH_PAGE) if views else None
 
 
 def _present(layout: Layout, base: str, entities: Iterable[str]) -> list[str]:
     return [f"{base}/{e}" for e in entities if layout.has(f"{base}/{e}")]
 
 
+def _lanes(layout: Layout, contents: list[str], origin: str, name: str) -> rrb.StateTimelineView:
+    return rrb.StateTimelineView(
+        origin=origin,
+        contents=contents,
+        name=name,
+        time_view=_time_axis(),
+        time_ranges=_window(layout),
+    )
+
+
 def _plot(
-    layout: Layout, contents: list[str], origin: str, name: str, legend: bool = False
+    layout: Layout,
+    contents: list[str],
+    origin: str,
+    name: str,
+    legend: bool = False,
+    ceiling: str | None = None,
 ) -> rrb.TimeSeriesView:
     """A time series of ``contents``: several series keep a legend (at the top left, above
-    the data: their y range leaves room for it), one series is named by the title alone."""
+    the data: their y range leaves room for it; ``ceiling``: the key of its highest value,
+    by default its origin), one series is named by the title alone."""
     if not legend or len(contents) == 1:
         return rrb.TimeSeriesView(
             origin=origin,
@@ -265,7 +312,7 @@ def _plot(
         contents=contents,
         name=name,
         axis_x=_time_axis(),
-        axis_y=_room_for_legend(layout, origin),
+        axis_y=_room_for_legend(layout, ceiling or origin),
         time_ranges=_window(layout),
         plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.LeftTop, visible=True),
     )

@@ -8,8 +8,10 @@ the blueprint (``analyzer/plot/blueprint.py``) lays them out; both read them fro
 /<bus>/<device>/current               /temperature_c           scalars
 /<bus>/<device>/state                 /fault                   state lanes
 /<bus>/<device>/commands                                       text log
+/<bus>/<device>/cycles                /cycles/log              cycle lane (by outcome), its log
 /<bus>/errors                                                  text log, levels from the flags
-/<bus>/health/frames_per_s  errors_per_s  unanswered_per_s  latency_ms
+/<bus>/health/load_pct  frames_per_s  errors_per_s  unanswered_per_s  latency_ms
+/<bus>/health/state                                            CAN controller state lane
 /session/errors                                                text log: events of no bus
 ```
 """
@@ -24,6 +26,9 @@ import numpy as np
 import rerun as rr
 
 from decoders.registers import STATE_TEXT, fault_text, opening_mm
+
+from ..cycles.looks import LOOKS
+from ..health.seconds import STATES as CONTROLLER_STATES
 
 CAPTURE_TIME: Final = "capture_time"  # the records' own timestamps
 FRAME: Final = "frame"  # the record's seq: the same number the TUI and the MCAP recording show
@@ -40,8 +45,16 @@ STATE: Final = "state"
 FAULT: Final = "fault"
 SESSION: Final = "session"  # where events that belong to no bus go (drops, a failed output)
 SESSION_ERRORS: Final = f"/{SESSION}/{ERRORS}"
-RATES: Final = ("frames_per_s", "errors_per_s", "unanswered_per_s")  # under /<bus>/health/
-LATENCY: Final = "latency_ms"  # under /<bus>/health/
+CYCLES: Final = "cycles"  # a gripper's cycle lane
+CYCLE_LOG: Final = f"{CYCLES}/log"  # ... and its log
+# under /<bus>/health/: the load, the rates, the latencies, the CAN controller's state
+LOAD: Final = "load_pct"
+FRAMES_PER_S: Final = "frames_per_s"
+ERRORS_PER_S: Final = "errors_per_s"
+UNANSWERED_PER_S: Final = "unanswered_per_s"
+RATES: Final = (FRAMES_PER_S, ERRORS_PER_S, UNANSWERED_PER_S)
+LATENCY: Final = "latency_ms"
+CONTROLLER: Final = "state"
 
 FAULT_MARK_COLOR: Final = 0xE3000BFF
 
@@ -98,13 +111,18 @@ OPENING_ENTITIES: Final = tuple(s.entity for s in SERIES if s.entity.startswith(
 # the state lanes: field -> entity
 LANES: Final = {"state": STATE, "fault": FAULT}
 
-# per-bus health: entity under /<bus>/health/ -> (legend, colour)
+# per-bus health: entity under /<bus>/health/ -> (legend after the bus's name, one colour per
+# bus, in the order the buses appear): a view shows one unit of every bus at once
+BUS_COLORS: Final = (0x1F77B4FF, 0x2CA02CFF, 0x9467BDFF, 0x8C564BFF, 0x17BECFFF, 0x7F7F7FFF)
 HEALTH_SERIES: Final = {
-    "frames_per_s": ("frames/s", 0x1F77B4FF),
-    "errors_per_s": ("errors/s", 0xE3000BFF),
-    "unanswered_per_s": ("unanswered/s", 0xFF7F0EFF),
-    LATENCY: ("latency (ms)", 0x2CA02CFF),
+    LOAD: ("load %", BUS_COLORS),
+    FRAMES_PER_S: ("frames/s", BUS_COLORS),
+    ERRORS_PER_S: ("errors/s", (0xE3000BFF, 0xF46D43FF, 0xA50026FF, 0xFDAE61FF)),
+    UNANSWERED_PER_S: ("unanswered/s", (0xFF7F0EFF, 0xFDB863FF, 0xB35806FF, 0xFEE0B6FF)),
+    LATENCY: ("latency (ms)", BUS_COLORS),
 }
+# the CAN controller's states (health.seconds.STATES), the worst last
+CONTROLLER_COLORS: Final = (0x2CA02CFF, 0xFFB000FF, 0xFF7F0EFF, 0xE3000BFF)
 
 # the manual's run states (1-6), coloured by what they mean for a grip
 STATE_COLORS: Final = {
@@ -150,6 +168,26 @@ def fault_marks_style() -> rr.SeriesPoints:
     )
 
 
-def health_style(entity: str) -> rr.SeriesLines:
-    name, color = HEALTH_SERIES[entity]
-    return rr.SeriesLines(names=name, colors=color)
+def health_style(entity: str, bus: str, index: int) -> rr.SeriesLines:
+    """A bus's health series, named after the bus, coloured by the bus's place (``index``)."""
+    name, colors = HEALTH_SERIES[entity]
+    return rr.SeriesLines(names=f"{bus} {name}", colors=colors[index % len(colors)])
+
+
+def controller_configuration() -> rr.StateConfiguration:
+    """The CAN controller's state lane: error active green, warning amber, passive orange,
+    bus-off red."""
+    return rr.StateConfiguration(
+        values=list(CONTROLLER_STATES),
+        labels=[s.replace("_", " ") for s in CONTROLLER_STATES],
+        colors=np.array(CONTROLLER_COLORS, dtype=np.uint32),  # 4 ints: not one RGBA colour
+    )
+
+
+def cycles_configuration() -> rr.StateConfiguration:
+    """A gripper's cycle lane: each outcome by name and colour (``cycles/looks.py``)."""
+    return rr.StateConfiguration(
+        values=list(LOOKS),
+        labels=[look.label for look in LOOKS.values()],
+        colors=np.array([look.color for look in LOOKS.values()], dtype=np.uint32),
+    )

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_INTERRUPTED, UsageError
-from ..live_runner import LiveOptions, run_demo, run_session
+from ..health.rates import BusRates, rates_of_capture
+from ..live_runner import LiveOptions, metadata, run_demo, run_session
 from ..session.batches import session_engine
 from ..session.capture import CaptureOptions, finish_capture, open_reader, run_capture
 from ..session.listener import Listener
@@ -26,7 +27,9 @@ if TYPE_CHECKING:
 class PlotOptions:
     """``eg2scope plot``'s options, typed. ``target``: where the plot goes; ``live``: a live
     session's (its recording, its end); ``taps``: the live sources; ``capture``: a capture to
-    plot instead (None: live); ``demo``: the simulated buses to plot instead (None: none)."""
+    plot instead (None: live); ``demo``: the simulated buses to plot instead (None: none).
+    A bus's load is counted at the rate a recording says its tap ran at, a live tap's own, or
+    the EG2's (``health.rates``)."""
 
     target: TargetChoice
     live: LiveOptions
@@ -57,7 +60,8 @@ def plot_capture(capture: CaptureOptions, choice: TargetChoice) -> int:
     target = chosen_target(choice, capture.path)
     reader = open_reader(capture)  # a capture that cannot be read fails before a viewer opens
     try:
-        listener = _capture_listener(capture, reader, target)
+        rates = rates_of_capture(reader.metadata)
+        listener = _capture_listener(capture, reader, target, rates)
     except BaseException:
         reader.close()
         raise
@@ -73,7 +77,7 @@ def plot_capture(capture: CaptureOptions, choice: TargetChoice) -> int:
 
 
 def _capture_listener(
-    capture: CaptureOptions, reader: CaptureReader, target: RerunTarget
+    capture: CaptureOptions, reader: CaptureReader, target: RerunTarget, rates: BusRates
 ) -> RerunListener:
     """The Rerun listener of a capture; a usage error, before a viewer opens, for an engine
     that cannot decode it."""
@@ -85,14 +89,16 @@ def _capture_listener(
         raise UsageError(f"--engine {capture.engine}: {exc}") from None
     # a paced replay is watched as it goes: update the viewer as often as live
     flush = LIVE_FLUSH_S if capture.speed is not None else None
-    return RerunListener(target, flush_interval=flush)
+    return RerunListener(target, flush_interval=flush, rates=rates)
 
 
 class UnreadCapture(Listener):
     """A capture from which nothing at all could be read gets no plot (no .rrd file); a
-    damaged one that yielded anything keeps its plot."""
+    damaged one that yielded anything keeps its plot. It only counts the raw items, so a
+    candump log is still read natively (a native ``FrameBatch`` has a length too)."""
 
     wants_raw = True
+    reads_frame_batches = True
 
     def __init__(self, reader: CaptureReader, output: Any) -> None:
         self.reader = reader
@@ -118,16 +124,21 @@ def plot_live(opts: PlotOptions) -> int:
     target = chosen_target(opts.target, opts.live.output)
     made: list[Any] = []  # made once the taps are open: a source that fails makes no file
     ended: list[Session] = []
+    rates = rates_of_capture(metadata(taps))  # the taps' own
     code = run_session(
-        opts.live, taps, show=None, extra=lambda: made_listener(made, target), on_done=ended.append
+        opts.live,
+        taps,
+        show=None,
+        extra=lambda: made_listener(made, target, rates),
+        on_done=ended.append,
     )
     return _finish_live(made[0], code, ended)
 
 
-def made_listener(made: list[Any], target: RerunTarget) -> list[Any]:
+def made_listener(made: list[Any], target: RerunTarget, rates: BusRates) -> list[Any]:
     from .listener import RerunListener
 
-    made.append(RerunListener(target, live=True))
+    made.append(RerunListener(target, live=True, rates=rates))
     return made
 
 
@@ -140,7 +151,7 @@ def _plot_demo(demo: DemoOptions, opts: PlotOptions) -> int:
         demo,
         opts.live,
         show=None,
-        extra=lambda: made_listener(made, target),
+        extra=lambda: made_listener(made, target, BusRates()),
         on_done=ended.append,
     )
     return _finish_live(made[0], code, ended)

@@ -37,18 +37,23 @@ import pyarrow as pa
 
 from decoders.model import Record
 
+from ..cycles.listener import CyclesListener
+from ..health.listener import HealthListener
+from ..health.rates import BusRates
 from ..model import LEVEL_NAMES, WARNING, SourceEvent
 from ..session.listener import Listener
 from . import entities as ent
 from .batch import SCALARS, STATE, TEXT_LOG, Batches, nanoseconds
-from .blueprint import Layout, blueprint
+from .blueprint import LATENCY_PLOT, LOAD_PLOT, RATES_PLOT, Layout, blueprint
+from .columns import LANE, NAN, SCALAR, TEXT, Columns, Entity
+from .cycles import RerunCycles
+from .health import BusHealthColumns, silent
 from .logs import log_rows
 from .target import RerunOutput, RerunTarget, parse_target
 
 if TYPE_CHECKING:
     from ..session.batches import RecordSequence, SampleSequence
 
-NAN: Final = float("nan")  # no timestamp
 # a live viewer is updated at least ten times a second: flushes are due on a fixed 80 ms grid
 # (12.5 a second), at the session's ticks or, when a batch keeps it busy, from a timer thread
 LIVE_FLUSH_S: Final = 0.08
@@ -57,10 +62,6 @@ LAYOUT_EVERY_S: Final = 1.0  # the blueprint is sent again at most this often
 # records and samples waiting before a flush, whatever the time: what waits (with its Arrow
 # copies and Rerun's) is most of a capture's peak memory; flushing more often costs no more CPU
 MAX_ROWS: Final = 40_000
-
-SCALAR: Final = "scalar"
-LANE: Final = "lane"
-TEXT: Final = "text"
 
 _LEVELS: Final = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ERROR"}
 # the state fields plotted, in the order their entities are sent
@@ -76,64 +77,6 @@ def _runs(buses: list[str]) -> list[tuple[str, int, int]]:
         indexes = list(group)
         runs.append((name, indexes[0], indexes[-1] + 1))
     return runs
-
-
-class _Entity:
-    """Where one series goes and how it looks: ``style`` is logged static with the first rows
-    (then None); ``convert`` turns a column of values into what is plotted (None: as it is)."""
-
-    __slots__ = ("convert", "kind", "path", "style")
-
-    def __init__(self, path: str, kind: str, style: Any = None, convert: Any = None) -> None:
-        self.path = path
-        self.kind = kind
-        self.style = style
-        self.convert = convert
-
-
-class _Columns(_Entity):
-    """The rows of one entity waiting to be sent, as typed arrays (no conversion when sent):
-    ``t`` in seconds (NaN: no timestamp), ``seq`` (None for entities that live on
-    ``capture_time`` only: health rates, source events), ``values`` (numbers for scalars,
-    a list for text)."""
-
-    __slots__ = ("levels", "seq", "t", "values")
-
-    def __init__(self, path: str, kind: str, style: Any = None, *, frame: bool = True) -> None:
-        super().__init__(path, kind, style)
-        self.t = array("d")
-        self.seq: array[int] | None = array("q") if frame else None
-        self.values: Any = array("d") if kind == SCALAR else []
-        self.levels: list[str] = []
-
-    def add(self, t: float | None, seq: int | None, value: Any, level: str = "") -> None:
-        self.t.append(NAN if t is None else t)
-        if self.seq is not None:
-            self.seq.append(-1 if seq is None else seq)
-        self.values.append(value)
-        if self.kind == TEXT:
-            self.levels.append(level)
-
-    def extend(self, t: list[float], seq: list[int], values: list[Any], levels: list[str]) -> None:
-        """Rows of a text log (``t`` NaN: no timestamp)."""
-        self.t.fromlist(t)
-        if self.seq is not None:
-            self.seq.fromlist(seq)
-        self.values += values
-        self.levels += levels
-
-    def take(self) -> tuple[np.ndarray, np.ndarray | None, Any, list[str]]:
-        """The rows so far (t, seq, values, levels), copied; the columns start empty."""
-        t = np.frombuffer(self.t, dtype=np.float64).copy()
-        seq = None if self.seq is None else np.frombuffer(self.seq, dtype=np.int64).copy()
-        values: Any = self.values[:]
-        if self.kind == SCALAR:
-            values = np.frombuffer(self.values, dtype=np.float64).copy()
-        rows = (t, seq, values, self.levels[:])
-        for buffer in (self.t, self.seq, self.values, self.levels):
-            if buffer is not None:
-                del buffer[:]
-        return rows
 
 
 # a field's rows: (field, t, seq, values)
@@ -218,18 +161,18 @@ class _Gripper:
     def __init__(self, bus: str, device: int) -> None:
         base = ent.gripper_path(bus, device)
         self.key = (bus, device)
-        self.by_field: dict[str, _Entity] = {
-            s.field: _Entity(f"{base}/{s.entity}", SCALAR, ent.series_style(s), s.convert)
+        self.by_field: dict[str, Entity] = {
+            s.field: Entity(f"{base}/{s.entity}", SCALAR, ent.series_style(s), s.convert)
             for s in ent.SERIES
         }
-        self.by_field["state"] = _Entity(f"{base}/{ent.STATE}", LANE, ent.state_configuration())
-        self.by_field["fault"] = _Entity(f"{base}/{ent.FAULT}", LANE, ent.fault_configuration())
-        self.commands = _Columns(f"{base}/{ent.COMMANDS}", TEXT)
-        self.marks = _Entity(f"{base}/{ent.FAULT_MARKS}", SCALAR, ent.fault_marks_style())
+        self.by_field["state"] = Entity(f"{base}/{ent.STATE}", LANE, ent.state_configuration())
+        self.by_field["fault"] = Entity(f"{base}/{ent.FAULT}", LANE, ent.fault_configuration())
+        self.commands = Columns(f"{base}/{ent.COMMANDS}", TEXT)
+        self.marks = Entity(f"{base}/{ent.FAULT_MARKS}", SCALAR, ent.fault_marks_style())
         self.mark_t: list[float | None] = []  # marks of records with errors or fault flags
         self.mark_seq: list[int] = []
         self.shapes: list[_Shape] = []
-        self.odd: dict[str, _Columns] = {}  # field -> rows of samples not filed by shape
+        self.odd: dict[str, Columns] = {}  # field -> rows of samples not filed by shape
         self.force: Any = None  # the force last read (sent): where a later fault mark sits
 
     def take(self) -> tuple[list[_Rows], list[float | None], list[int]]:
@@ -251,40 +194,45 @@ class _Gripper:
 
 
 class _Bus:
-    """One bus's error log and health: frames, errors and unanswered requests per second of
-    capture time (a point at the end of each second; a silent stretch drops to zero), and every
-    latency. Record times are gathered as they come and counted per second when sent."""
+    """One bus's error log and health: its load, frames and errors per second
+    (``plot/health.py``, from the bus health's seconds), unanswered requests per second of
+    capture time (a point at the end of each second; a silent stretch drops to zero), and
+    every latency. Record times are gathered as they come and counted per second when sent."""
 
     __slots__ = (
         "errors",
+        "first_t",
         "health",
-        "highest_rate",
+        "highest_latency",
         "last_t",
         "latency",
-        "nonframes",
-        "problems",
         "times",
         "unanswered",
+        "unanswered_per_s",
     )
 
-    def __init__(self, bus: str) -> None:
+    def __init__(self, bus: str, index: int, rates: BusRates) -> None:
         base = ent.bus_path(bus)
-        self.errors = _Columns(f"{base}/{ent.ERRORS}", TEXT)
+        self.errors = Columns(f"{base}/{ent.ERRORS}", TEXT)
         health = f"{base}/{ent.HEALTH}"
-        self.latency = _Columns(f"{health}/{ent.LATENCY}", SCALAR, ent.health_style(ent.LATENCY))
-        self.health = {
-            name: _Columns(f"{health}/{name}", SCALAR, ent.health_style(name), frame=False)
-            for name in ent.RATES
-        }
-        self.highest_rate = 0.0  # the health plot's y range leaves room above it
+        self.latency = Columns(
+            f"{health}/{ent.LATENCY}", SCALAR, ent.health_style(ent.LATENCY, bus, index)
+        )
+        self.unanswered_per_s = Columns(
+            f"{health}/{ent.UNANSWERED_PER_S}",
+            SCALAR,
+            ent.health_style(ent.UNANSWERED_PER_S, bus, index),
+            frame=False,
+        )
+        self.health = BusHealthColumns(bus, index, rates)
+        self.highest_latency = 0.0  # the latency plot's y range leaves room above it
+        self.first_t = math.inf  # the bus's first record: where its controller state begins
         self.last_t = -math.inf  # the bus's last record: where the last, partial second ends
         self.times = array("d")  # every record's t
-        self.nonframes = array("d")  # ... of garbage and truncated records
-        self.problems = array("d")  # ... of records with errors
         self.unanswered = array("d")  # ... of unanswered requests
 
     def count_seconds(self, final: bool) -> None:
-        """Count the finished seconds into the health columns; the second still being
+        """Count the unanswered requests of the finished seconds; the second still being
         captured waits for the next call (unless ``final``)."""
         if not self.times:
             return
@@ -296,43 +244,21 @@ class _Bus:
         secs = np.unique(seconds[done])
         if not len(secs):
             return
-        frames = np.bincount(np.searchsorted(secs, seconds[done]), minlength=len(secs))
-        counts = {
-            "frames_per_s": frames - self._per_second("nonframes", secs, last, final),
-            "errors_per_s": self._per_second("problems", secs, last, final),
-            "unanswered_per_s": self._per_second("unanswered", secs, last, final),
-        }
+        unanswered = np.floor(np.frombuffer(self.unanswered, dtype=np.float64))
+        kept = unanswered >= last if not final else np.zeros(len(unanswered), bool)
+        self.unanswered = array("d", unanswered[kept].tobytes())
+        idx = np.searchsorted(secs, unanswered[~kept])
+        counts = np.bincount(idx[idx < len(secs)], minlength=len(secs))
         # a point at the end of each second; the capture's last, partial second at its end
-        ends, zeros = np.minimum(secs + 1, self.last_t), _silent(secs)
-        self.highest_rate = max(self.highest_rate, float(counts["frames_per_s"].max()))
-        for name, values in counts.items():
-            t = np.concatenate([ends, zeros])
-            order = np.argsort(t, kind="stable")
-            column = self.health[name]
-            column.t.extend(t[order].tolist())
-            column.values.extend(np.concatenate([values, np.zeros(len(zeros))])[order].tolist())
+        ends, zeros = np.minimum(secs + 1, self.last_t), silent(secs)
+        t = np.concatenate([ends, zeros])
+        order = np.argsort(t, kind="stable")
+        column = self.unanswered_per_s
+        column.t.extend(t[order].tolist())
+        column.values.extend(np.concatenate([counts, np.zeros(len(zeros))])[order].tolist())
 
-    def _per_second(self, name: str, secs: np.ndarray, last: float, final: bool) -> np.ndarray:
-        """How many of the times in list ``name`` fall in each of ``secs``; times in the second
-        still being captured stay in the list."""
-        seconds = np.floor(np.frombuffer(getattr(self, name), dtype=np.float64))
-        done = seconds < last if not final else np.ones(len(seconds), bool)
-        setattr(self, name, array("d", seconds[~done].tobytes()))
-
-        idx = np.searchsorted(secs, seconds[done])
-        return np.bincount(idx[idx < len(secs)], minlength=len(secs))
-
-    def columns(self) -> list[_Columns]:
-        return [self.errors, self.latency, *self.health.values()]
-
-
-def _silent(secs: np.ndarray) -> np.ndarray:
-    """Zero points for the seconds without records between ``secs``: at the end of the first
-    and of the last silent second of each gap."""
-    gap = np.nonzero(secs[1:] > secs[:-1] + 1)[0]
-    first = secs[gap] + 2
-    last = secs[gap + 1]
-    return np.unique(np.concatenate([first, last[last > first]]))
+    def columns(self) -> list[Columns]:
+        return [self.errors, self.latency, self.unanswered_per_s, *self.health.columns()]
 
 
 class RerunListener(Listener):
@@ -342,6 +268,8 @@ class RerunListener(Listener):
     thread keeps the flushes on their grid however long the session's batches take)."""
 
     wants_states = True
+    wants_raw = True  # the bus health counts the raw frames (a native FrameBatch too)
+    reads_frame_batches = True
     label = "rerun"
 
     def __init__(
@@ -351,6 +279,7 @@ class RerunListener(Listener):
         live: bool = False,
         flush_interval: float | None = None,
         max_rows: int = MAX_ROWS,
+        rates: BusRates | None = None,
     ) -> None:
         self.live = live
         self.layout = Layout(live=live)
@@ -366,7 +295,11 @@ class RerunListener(Listener):
         self.max_rows = max_rows
         self.grippers: dict[tuple[str, int], _Gripper] = {}
         self.buses: dict[str, _Bus] = {}
-        self.session_errors: _Columns | None = None
+        self.session_errors: Columns | None = None
+        # the bus health's seconds and the grip cycles, by their own listeners
+        self.health = HealthListener(rates, seconds=True)
+        self.cycles = RerunCycles()
+        self._cycles = CyclesListener(self.cycles)
         # (bus, device, *fields changed) -> the shape its samples are filed under; False: a
         # shape with nothing plotted (a poll's last_command, a write's latency)
         self._shapes: dict[tuple[str, int, tuple[str, ...]], _Shape] = {}
@@ -409,6 +342,7 @@ class RerunListener(Listener):
                     shape = self._new_shape(bus, device, fields)
                 for k in shape.extend(times, seqs, columns):
                     self._odd(shape, times[k], seqs[k], [c[k] for c in columns])
+            self._cycles.on_states(samples)
             self._pending += len(samples)
             self._mid_batch = False
             self._batch_done.notify_all()
@@ -433,6 +367,7 @@ class RerunListener(Listener):
                 if part:
                     bus.times.fromlist(part)
                     bus.last_t = max(bus.last_t, max(part))
+                    bus.first_t = min(bus.first_t, min(part))
                 # a latency needs both times: never NaN
                 timed = ~(np.isnan(latencies[lo:hi]) | np.isnan(stamps[lo:hi]))
                 if timed.any():
@@ -440,19 +375,26 @@ class RerunListener(Listener):
                     latency.t.frombytes(stamps[lo:hi][timed].tobytes())
                     latency.seq.frombytes(seqs[lo:hi][timed].tobytes())  # type: ignore[union-attr]
                     latency.values.frombytes(latencies[lo:hi][timed].tobytes())
+                    highest = float(latencies[lo:hi][timed].max())
+                    bus.highest_latency = max(bus.highest_latency, highest)
             self._logs(records)
+            self.health.on_records(records)
+            self._cycles.on_records(records)
             self._pending += len(records)
+
+    def on_raw(self, items: Any) -> None:
+        """The raw input, for the bus health (a list of Items, or a native FrameBatch)."""
+        with self._lock:
+            self.health.on_raw(items)
 
     def _logs(self, records: RecordSequence) -> None:
         """The records the logs show: problems in their bus's error log and health counts,
         commands and fault marks under their gripper (``plot/logs.log_rows``: columns, not
         one object per record, on the native path)."""
         buses, grippers = log_rows(records)
-        for name, (t, seq, text, level, nonframes, problems, unanswered) in buses.items():
+        for name, (t, seq, text, level, _, _, unanswered) in buses.items():
             bus = self.buses[name]  # made for the records' runs
             bus.errors.extend(t, seq, text, level)
-            bus.nonframes.fromlist(nonframes)
-            bus.problems.fromlist(problems)
             bus.unanswered.fromlist(unanswered)
         for key, (t, seq, text, level, mark_t, mark_seq) in grippers.items():
             g = self.grippers.get(key) or self._gripper(*key)
@@ -482,7 +424,7 @@ class RerunListener(Listener):
                 columns = bus.errors
             else:
                 if self.session_errors is None:
-                    self.session_errors = _Columns(ent.SESSION_ERRORS, TEXT, frame=False)
+                    self.session_errors = Columns(ent.SESSION_ERRORS, TEXT, frame=False)
                 columns = self.session_errors
             level = _LEVELS.get(LEVEL_NAMES.get(event.level, "info"), "INFO")
             columns.add(event.t, None, event.message, level)
@@ -492,6 +434,7 @@ class RerunListener(Listener):
             self._mid_batch = False  # the batch is complete
             self._batch_done.notify_all()
             self._raise_failure()
+            self._cycles.tick(now)
             due = self._pending >= self.max_rows or (
                 self._pending and time.monotonic() >= self._next_flush
             )
@@ -505,6 +448,7 @@ class RerunListener(Listener):
                 return
             self._closed = True
             self._mid_batch = False
+            self._cycles.close()  # the cycles still open end with the session
         self.flush(final=True)
         self.output.finish(blueprint(self.layout))
 
@@ -593,11 +537,19 @@ class RerunListener(Listener):
         layout = self.layout.with_paths(self._sent_paths)
         for key in readings:
             layout = layout.with_gripper(*key)
+        for key, cycles in self.cycles.grippers.items():  # a gripper whose cycles alone show
+            if cycles.lane.path in self._sent_paths:
+                layout = layout.with_gripper(*key)
         if not self._timed and self._untimed:  # no timestamps: the frame timeline only
             layout = layout.with_timeline(ent.FRAME)
-        for bus_name, bus in self.buses.items():
-            if bus.highest_rate:
-                self._highest[f"{ent.bus_path(bus_name)}/{ent.HEALTH}"] = bus.highest_rate
+        for bus in self.buses.values():
+            for plot, highest in (
+                (RATES_PLOT, bus.health.highest_rate),
+                (LOAD_PLOT, bus.health.highest_load),
+                (LATENCY_PLOT, bus.highest_latency),
+            ):
+                if highest:
+                    self._highest[plot] = max(self._highest.get(plot, 0.0), highest)
         for origin, highest in self._highest.items():
             layout = layout.with_ceiling(origin, highest)
         if final and not self.live:
@@ -608,10 +560,19 @@ class RerunListener(Listener):
                 layout = layout.with_span(int(first), int(last))
         return layout
 
-    def _columns(self, final: bool) -> list[_Columns]:
-        """The commands, error logs and health columns (the finished seconds counted)."""
+    def _columns(self, final: bool) -> list[Columns]:
+        """The commands, cycles, error logs and health columns (the finished seconds
+        counted)."""
         out = [g.commands for g in self.grippers.values()]
-        for bus in self.buses.values():
+        out += self.cycles.columns()
+        seconds: dict[str, list[Any]] = {}
+        for row in self.health.take_seconds(final):
+            seconds.setdefault(row.bus, []).append(row)
+        for name in seconds:
+            if name not in self.buses:
+                self._bus(name)
+        for name, bus in self.buses.items():
+            bus.health.add(seconds.get(name, []), bus.first_t, bus.last_t, final)
             bus.count_seconds(final)
             out += bus.columns()
         if self.session_errors is not None:
@@ -677,7 +638,7 @@ class RerunListener(Listener):
             g.force = force[-1]
 
     def _send_entity(
-        self, e: _Entity, t: np.ndarray, seq: np.ndarray | None, data: Any, levels: list[str]
+        self, e: Entity, t: np.ndarray, seq: np.ndarray | None, data: Any, levels: list[str]
     ) -> None:
         """Rows of ``e`` as one chunk (two when only some rows have a timestamp)."""
         if e.style is not None:
@@ -705,7 +666,7 @@ class RerunListener(Listener):
 
     def _send_rows(
         self,
-        e: _Entity,
+        e: Entity,
         stamps: np.ndarray | None,
         seq: np.ndarray | None,
         data: Any,
@@ -743,7 +704,7 @@ class RerunListener(Listener):
             c = g.odd.get(field)
             if c is None:
                 e = g.by_field[field]
-                c = g.odd[field] = _Columns(e.path, e.kind)
+                c = g.odd[field] = Columns(e.path, e.kind)
             c.add(t, seq, value)
 
     def _gripper(self, bus: str, device: int) -> _Gripper:
@@ -757,7 +718,7 @@ class RerunListener(Listener):
         return self.grippers.get((rec.bus, rec.device)) or self._gripper(rec.bus, rec.device)
 
     def _bus(self, name: str) -> _Bus:
-        bus = self.buses[name] = _Bus(name)
+        bus = self.buses[name] = _Bus(name, len(self.buses), self.health.rates)
         self.layout = self.layout.with_bus(name)
         return bus
 
@@ -774,11 +735,15 @@ def _lane_values(values: Any) -> list[str]:
 
 
 def rerun_listener(
-    target: str | None, source: str | None = None, live: bool = True
+    target: str | None,
+    source: str | None = None,
+    live: bool = True,
+    rates: BusRates | None = None,
 ) -> RerunListener | None:
     """The Rerun listener ``--rerun TARGET`` asks for (``target``: the option's value), or None
     without it. ``source`` names the default .rrd file (None: a dated name); ``live``: a live
-    session (False for a capture replayed in the TUI)."""
+    session (False for a capture replayed in the TUI); ``rates``: each bus's rate (None: the
+    EG2's)."""
     if target is None:
         return None
-    return RerunListener(parse_target(target, source), live=live)
+    return RerunListener(parse_target(target, source), live=live, rates=rates)

@@ -1,12 +1,15 @@
 """Fixtures of the end-to-end matrix: every input kind made once per test session
 (``e2e_inputs``), and each one's reference decode (``decode --format jsonl --engine python``, a
-real process) and reference state samples (a Python-engine session), which every cell is
-compared with."""
+real process), reference state samples (a Python-engine session), and where a cell needs them
+its grip cycles (``cycles --format jsonl --engine python``) and ``stats --format json``, real
+processes too, which every cell is compared with."""
 
 from __future__ import annotations
 
 import os
+from typing import Any
 
+import orjson
 import pytest
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
@@ -29,6 +32,8 @@ class References:
         self.inputs = inputs
         self._decoded: dict[str, Decoded] = {}
         self._samples: dict[str, list[StateSample]] = {}
+        self._cycles: dict[str, list[dict[str, Any]]] = {}
+        self._stats: dict[str, dict[str, Any]] = {}
 
     def decoded(self, kind: str) -> Decoded:
         if kind not in self._decoded:
@@ -43,6 +48,23 @@ class References:
         if kind not in self._samples:
             self._samples[kind] = python_samples(self.inputs[kind])
         return self._samples[kind]
+
+    def cycles(self, kind: str) -> list[dict[str, Any]]:
+        if kind not in self._cycles:
+            path = self.inputs[kind]
+            proc = eg2scope("cycles", str(path), "--format", "jsonl", "--engine", "python",
+                            cwd=path.parent)  # fmt: skip
+            assert proc.returncode == 0, proc.stderr.decode()
+            self._cycles[kind] = [orjson.loads(line) for line in proc.stdout.splitlines()]
+        return self._cycles[kind]
+
+    def stats(self, kind: str) -> dict[str, Any]:
+        if kind not in self._stats:
+            path = self.inputs[kind]
+            proc = eg2scope("stats", str(path), "--format", "json", cwd=path.parent)
+            assert proc.returncode in (0, 3), proc.stderr.decode()
+            self._stats[kind] = orjson.loads(proc.stdout)
+        return self._stats[kind]
 
 
 @pytest.fixture(scope="session")

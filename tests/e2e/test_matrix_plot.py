@@ -1,8 +1,9 @@
 """``eg2scope plot CAPTURE --save x.rrd`` on every input kind, read back: each gripper's
 opening samples are the readings a Python-engine session tracks from decode's records (same
-frames, same millimetres), and every view of the saved blueprint shows data. As a real process
-(its default engine; a few at a time), and in this process on each session engine; and the
-live demo plotted beside its own recording."""
+frames, same millimetres), its grip cycles lane and log hold the cycles ``cycles`` finds, each
+bus's health second by second adds up to what ``stats`` reports, and every view of the saved
+blueprint shows data. As a real process (its default engine; a few at a time), and in this
+process on each session engine; and the live demo plotted beside its own recording."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from e2e_checks import (
     skip_unless_native,
 )
 from e2e_inputs import CAN_IDS, IDS, LIVE_PLOT
+from plot_checks import check_bus_health, check_cycles
 
 from analyzer.cli import main
 
@@ -36,7 +38,21 @@ def check_plot(rrd_path: Path, kind: str, reference) -> None:
     for entity, rows in expected.items():
         bus = entity.split("/")[1]
         assert {(bus, seq) for seq, _ in rows} <= decoded  # readings of decoded records
-    check_rrd(read_rrd(rrd_path), expected)
+    rrd = read_rrd(rrd_path)
+    check_rrd(rrd, expected)
+    check_cycles_and_health(rrd, reference.cycles(kind), reference.stats(kind))
+
+
+def check_cycles_and_health(rrd: Rrd, cycles: list, stats: dict, live: bool = False) -> None:
+    """The cycles ``cycles`` finds, on their lanes and logs; each timed bus's seconds adding up
+    to ``stats``' figures (a raw dump has no time: no health rows). ``live``: a live plot
+    against its recording (``plot_checks.check_cycles``; a serial frame within 10 ms)."""
+    assert cycles, "the input has grip cycles"
+    check_cycles(rrd, cycles, 10_000_000 if live else 0, live)
+    timed = [b for b in stats["buses"] if b["timing"] is None]
+    for figures in timed:
+        check_bus_health(rrd, figures)
+    assert not any("/health/load_pct" in p for p in rrd.entities) or timed
 
 
 def check_rrd(rrd: Rrd, expected: dict[str, list[tuple[int, float]]]) -> None:
@@ -74,8 +90,13 @@ def test_plot_on_each_engine(kind: str, engine: str, inputs, reference, tmp_path
     check_plot(out, kind, reference)
 
 
-def test_plot_live_demo_beside_its_recording(inputs) -> None:
+def test_plot_live_demo_beside_its_recording(inputs, reference) -> None:
     """``record --demo --rerun live.rrd``: the live plot holds every opening reading the
-    session's recording holds on ``/state``."""
+    session's recording holds on ``/state``, the grip cycles and bus health its replay gives
+    (the live session numbers its records its own way, and times a serial frame within 10 ms
+    of its replay: mostly one byte time apart)."""
     mcap = inputs[LIVE_PLOT.id]
-    check_rrd(read_rrd(mcap.with_suffix(".rrd")), recorded_openings(mcap))
+    rrd = read_rrd(mcap.with_suffix(".rrd"))
+    check_rrd(rrd, recorded_openings(mcap))
+    cycles, stats = reference.cycles(LIVE_PLOT.id), reference.stats(LIVE_PLOT.id)
+    check_cycles_and_health(rrd, cycles, stats, live=True)

@@ -13,6 +13,7 @@ from typing import Any
 
 import can
 
+from analyzer.health.listener import HealthListener
 from analyzer.model import StateSample
 from analyzer.recording.recorder import McapRecorder
 from analyzer.session.capture import CaptureOptions, run_capture
@@ -26,13 +27,15 @@ CAPTURES = ROOT / "captures"
 
 
 class Collector(Listener):
-    """What the session decoded, beside the Rerun listener."""
+    """What the session decoded, beside the Rerun listener; ``health``: a bus health listener
+    to run beside them (what ``stats`` reports of the same capture)."""
 
     wants_states = True
 
     def __init__(self) -> None:
         self.records: list[Record] = []
         self.samples: list[StateSample] = []
+        self.health = HealthListener()
 
     def on_records(self, records: list[Record]) -> None:
         self.records += records

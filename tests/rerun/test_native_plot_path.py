@@ -25,6 +25,7 @@ from analyzer.plot.logs import log_rows
 from analyzer.session.batches import RecordSequence
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
+from analyzer.sources.source import CaptureSource
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from traffic import warning_can_frames
@@ -193,3 +194,29 @@ def test_the_rerun_listener_on_native_frames_logs_every_problem(tmp_path: Path) 
     problems = [r for r in collected.records if r.errors or r.warnings]
     assert sorted(log.frame) == [r.seq for r in problems]
     assert log.levels.count("WARN") == len(problems)
+
+
+def test_eg2scope_plot_reads_a_candump_log_natively(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``eg2scope plot`` itself (its listeners: the Rerun listener with its bus health, and the
+    check for an unreadable capture) lets the native core read the log, and plots what the
+    Python reader gives."""
+    sources: list[CaptureSource] = []
+    started = CaptureSource.start
+
+    def start(self: CaptureSource) -> None:
+        sources.append(self)
+        started(self)
+
+    monkeypatch.setattr(CaptureSource, "start", start)
+    rrds = {}
+    for engine in ("native", "python"):
+        out = tmp_path / f"{engine}.rrd"
+        argv = ["plot", str(warnings_log(tmp_path)), "--save", str(out), "--no-progress"]
+        assert main([*argv, "--engine", engine]) == 0
+        rrds[engine] = read_rrd(out)
+    assert sources[0].frames is not None and sources[1].frames is None
+    native, python = rrds["native"], rrds["python"]
+    assert native.entities.keys() == python.entities.keys()
+    assert all(native[p].rows() == e.rows() for p, e in python.entities.items())

@@ -287,7 +287,9 @@ def test_plot_demo_live_on_ptys_and_the_virtual_can_bus(tmp_path: Path) -> None:
         for device in (1, 2):
             assert rrd[f"/{bus}/{device}/opening_mm/measured"].values, (bus, device)
             assert rrd[f"/{bus}/{device}/state"].values, (bus, device)
+            assert "gripped" in rrd[f"/{bus}/{device}/cycles"].values, (bus, device)
         assert sum(rrd[f"/{bus}/health/frames_per_s"].values) > 10
+        assert max(rrd[f"/{bus}/health/load_pct"].values) > 0
     assert rrd.timelines() == {"capture_time", "frame"}
     text = blueprint_text(rrd)
     assert "VisibleTimeRanges" in text  # live: a sliding window
@@ -299,6 +301,11 @@ def test_plot_demo_live_on_ptys_and_the_virtual_can_bus(tmp_path: Path) -> None:
     names = {v.name for v in shown}
     assert "can0 ID 1: force" in names and "can0 ID 1: current" not in names  # CAN polls none
     assert "rs485 ID 1: current" in names
+    # a tab for the bus health of all three buses, a view per unit
+    health = {v.name: v.entities for v in shown if "bus health" in v.containers}
+    loads = {f"/{bus}/health/load_pct" for bus in ("rs232", "rs485", "can0")}
+    assert set(health["bus load (%)"]) == loads
+    assert health["CAN controller state"] == ["/can0/health/state"]
 
 
 def run_main_while(argv: list[str], feed: Any) -> int:

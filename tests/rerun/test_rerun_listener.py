@@ -12,17 +12,22 @@ import threading
 import time
 import tty
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import can
 import pytest
 from native_core import require_native
+from plot_checks import check_bus_health
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
+from analyzer.health.rates import BusRates
+from analyzer.health.seconds import HealthSecond
 from analyzer.model import StateSample
 from analyzer.plot.blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
+from analyzer.plot.health import BusHealthColumns
 from analyzer.plot.listener import RerunListener
 from analyzer.session.batches import RecordSequence, SampleSequence
 from analyzer.session.capture import CaptureOptions, run_capture
@@ -60,7 +65,7 @@ def plot(path: Path, out: Path, engine: str = "python") -> tuple[Collector, Rrd]
     collector = Collector()
     listener = RerunListener(str(out))
     opts = CaptureOptions(str(path), progress=False, engine=engine)
-    session, _ = run_capture(opts, [collector, listener])
+    session, _ = run_capture(opts, [collector, listener, collector.health])
     assert not session.detached
     return collector, read_rrd(out)
 
@@ -162,7 +167,7 @@ def test_every_state_sample_is_plotted_with_its_time_seq_and_value(
         for p, e in rrd.entities.items()
         if p.count("/") >= 3
         and p.split("/")[2].isdigit()
-        and not p.endswith(("commands", "faults"))
+        and not p.endswith(("commands", "faults", "cycles", "cycles/log"))
         and e.values
     }
     assert gripper_entities == set(expected), "no entity without a sample behind it"
@@ -205,7 +210,8 @@ def test_two_timelines_and_no_sdk_timelines(plotted: Plotted, name: str, engine:
     if name in TIMED:
         assert rrd.timelines() == {"capture_time", "frame"}
         for path, e in data.items():
-            want = {"capture_time"} if "_per_s" in path else {"capture_time", "frame"}
+            seconds = "/health/" in path and not path.endswith("latency_ms")  # per second
+            want = {"capture_time"} if seconds else {"capture_time", "frame"}
             assert e.timelines == want, path
     else:  # a raw dump carries no time: the frame timeline only
         assert rrd.timelines() == {"frame"}
@@ -236,7 +242,11 @@ def test_a_view_for_every_quantity_the_capture_carries_and_none_other(
     collector, rrd = plotted[name, engine]
     shown = views(rrd)
     drawn = {e for v in shown if v.kind != "TextLog" for e in v.entities}
-    gripper_rows = {e for e in drawn if e.split("/")[2].isdigit() and "faults" not in e}
+    gripper_rows = {
+        e
+        for e in drawn
+        if e.split("/")[2].isdigit() and "faults" not in e and not e.endswith("/cycles")
+    }
     assert gripper_rows == set(expected_series(collector.samples))
     grippers = {(s.bus, s.device) for s in collector.samples if set(s.changed) & PLOTTED}
     titled = {v.name.split(":")[0] for v in shown if v.kind != "TextLog" and " ID " in v.name}
@@ -392,16 +402,19 @@ def test_commands_in_words_without_the_polls(plotted: Plotted, name: str, engine
 def test_bus_health_counts_every_frame_error_and_latency(
     plotted: Plotted, name: str, engine: str
 ) -> None:
+    """Frames, errors and the load per second are the bus health's (what ``stats`` reports);
+    unanswered requests and latencies come from the records."""
     collector, rrd = plotted[name, engine]
+    buses = collector.health.buses()
+    assert {b["bus"] for b in buses} == {r.bus for r in collector.records if r.t is not None}
+    for figures in buses:
+        check_bus_health(rrd, figures)
     for bus in {r.bus for r in collector.records if r.t is not None}:
         timed = [r for r in collector.records if r.t is not None and r.bus == bus]
         frames = rrd[f"/{bus}/health/frames_per_s"]
-        assert sum(frames.values) == sum(1 for r in timed if r.kind == FRAME)
-        errors = rrd[f"/{bus}/health/errors_per_s"].values
-        assert sum(errors) == sum(1 for r in timed if r.errors)
         unanswered = sum(1 for r in timed if UNANSWERED in r.flags)
         assert sum(rrd[f"/{bus}/health/unanswered_per_s"].values) == unanswered
-        seconds = sorted({math.floor(r.t) for r in timed if r.t is not None})
+        seconds = sorted({math.floor(r.t) for r in timed if r.kind == FRAME and not r.errors})
         ends = [t / 1e9 for t, v in zip(frames.capture_time, frames.values, strict=True) if v]
         last = max(r.t for r in timed if r.t is not None)
         # one point at the end of each second; the last, partial one at the last record
@@ -529,6 +542,11 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
 
     def feed() -> None:
         with can.Bus(interface="virtual", channel=channel) as sender:
+            for f in (  # a motion command: the target opening written
+                b.can_write_request(1, 1020, b.u16le(410)),
+                b.can_write_response(1, 1020, 2),
+            ):
+                sender.send(can.Message(arbitration_id=f.arbitration_id, data=f.data))
             for i in range(60):
                 opening = 1000 - 10 * i
                 for f in (
@@ -552,7 +570,18 @@ def test_live_on_the_virtual_can_bus(tmp_path: Path, engine: str) -> None:
     shown = views(rrd)  # the blueprint grew with the data: a view for each quantity polled
     assert all(v.entities for v in shown)
     assert {v.name for v in shown} >= {"can0 ID 1: force", "can0 ID 1: current"}
-    assert not any("state" in v.name for v in shown)  # 1128 was never polled
+    lanes = {v.name: v.entities for v in shown if v.kind == "StateTimeline"}
+    assert lanes["can0 ID 1: cycles, state"] == ["/can0/1/cycles"]  # 1128 was never polled
+    # the bus health, as each second ended: one view per unit
+    health = {v.name: v.entities for v in shown if "bus health" in v.containers}
+    assert health["bus load (%)"] == ["/can0/health/load_pct"]
+    assert health["CAN controller state"] == ["/can0/health/state"]
+    assert rrd["/can0/health/state"].values == ["error_active"]
+    # the grip cycle the write began, on its gripper's lane at the write's seq, as it ended
+    (write,) = [r for r in collector.records if r.direction == REQUEST and r.code == 1]
+    lane = rrd["/can0/1/cycles"]
+    assert lane.frame[0] == write.seq and lane.values[0]
+    assert rrd["/can0/1/cycles/log"].values[0].startswith("move to 28.7 mm: ")
 
 
 def test_live_on_a_serial_pty(tmp_path: Path) -> None:
@@ -581,7 +610,7 @@ def test_live_on_a_serial_pty(tmp_path: Path) -> None:
     # only the opening was read: no other plot of the gripper (a loaded machine may split a
     # frame, so the error log may or may not be there)
     assert {n for n in names if n.startswith("rs232 ID 1")} == {"rs232 ID 1: opening (mm)"}
-    assert {"rs232 frames, errors, unanswered per s", "rs232 latency (ms)"} <= names
+    assert {"frames, errors, unanswered per s", "latency (ms)"} <= names
     assert all(v.entities for v in shown)
     assert Counter(s.bus for s in collector.samples) == Counter({"rs232": 24})
 
@@ -651,3 +680,18 @@ def test_a_live_listener_flushes_on_its_timer_while_the_session_is_busy(tmp_path
     assert flushes[1] == "rerun-flush"
     rows = read_rrd(tmp_path / "timer.rrd")["/can0/1/force/measured"].rows()
     assert [(frame, value) for _, frame, value in rows] == [(1, 10), (2, 11)]
+
+
+def test_a_serial_second_handed_out_in_two_parts_is_plotted_once() -> None:
+    """A serial line's second counted from its reads, then from records that came later: one
+    point, plotted once the records have passed the second, the parts added up."""
+    columns = BusHealthColumns("rs485", 0, BusRates())
+    first = HealthSecond("rs485", "serial", 100, 3, 300, round(300 / 1152, 3), 0, None, None)
+    columns.add([first], 100.0, 100.9, final=False)  # the records are still in second 100
+    assert not columns.series["frames_per_s"].values
+    more = replace(first, frames=2, bits=200, load_pct=round(200 / 1152, 3), errors=1)
+    columns.add([more], 100.0, 101.2, final=False)
+    assert list(columns.series["frames_per_s"].values) == [5.0]
+    assert list(columns.series["errors_per_s"].values) == [1.0]
+    assert list(columns.series["load_pct"].values) == [round(500 / 1152, 3)]
+    assert list(columns.series["load_pct"].t) == [101.0]
