@@ -6,24 +6,17 @@ CAN bus, the controller's state (a ``StateChange`` lane: the worst state of each
 second's start, logged when it changes; the first from the bus's first record, so the lane does
 not begin before the capture). All on ``capture_time`` only: a second has no frame.
 
-A serial line's seconds are counted from its reads (the bits) and from its records (the frames),
-which come later (a frame is finished after its last byte, and merged by time with the other
-buses'): the bus health may hand out a second, then more of it. So a serial second is plotted
-once the bus's records have passed it (what came of it meanwhile added up), a CAN second as it
-comes (its frames and records arrive together), every second at the end.
+The bus health hands out each second once, when the bus has passed it (``SecondLog``), and
+every second at the end: each is plotted as it comes.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Final
 
 import numpy as np
 
-from ..health.bus import CAN, SERIAL
-from ..health.figures import PERCENT_DIGITS
-from ..health.rates import BusRates
 from ..health.seconds import HealthSecond
 from . import entities as ent
 from .columns import LANE, SCALAR, Columns
@@ -41,11 +34,9 @@ class BusHealthColumns:
     ``highest_rate``, ``highest_load``: the most frames or errors in a second so far, the
     highest load (the y ranges of the views)."""
 
-    def __init__(self, bus: str, index: int, rates: BusRates) -> None:
+    def __init__(self, bus: str, index: int) -> None:
         base = f"{ent.bus_path(bus)}/{ent.HEALTH}"
         self.bus = bus
-        self.rates = rates  # a second's load, when parts of it are added up
-        self.waiting: dict[int, HealthSecond] = {}  # seconds handed out, not yet plotted
         self.series = {
             name: Columns(f"{base}/{name}", SCALAR, ent.health_style(name, bus, index), frame=False)
             for name in _FIGURES
@@ -58,28 +49,10 @@ class BusHealthColumns:
         self.highest_rate = 0.0
         self.highest_load = 0.0
 
-    def add(self, rows: list[HealthSecond], first_t: float, last_t: float, final: bool) -> None:
+    def add(self, rows: list[HealthSecond], first_t: float, last_t: float) -> None:
         """The bus's seconds (in order) as the bus health hands them out; ``first_t`` and
-        ``last_t``: its first and last record's time (where the first state begins, how far
-        the records have come, where the last, partial second ends); ``final``: the end."""
-        for row in rows:
-            had = self.waiting.get(row.second)
-            self.waiting[row.second] = row if had is None else self._sum(had, row)
-        done = sorted(
-            s for s, r in self.waiting.items() if final or r.kind == CAN or s + 1 <= last_t
-        )
-        self._plot([self.waiting.pop(s) for s in done], first_t, last_t)
-
-    def _sum(self, a: HealthSecond, b: HealthSecond) -> HealthSecond:
-        """Two parts of one second, added up (the later state and worst event kept: a serial
-        line has no state, and its worst event is not plotted)."""
-        bits = a.bits + b.bits
-        rate = (self.rates.serial if a.kind == SERIAL else self.rates.can)(self.bus).value
-        load = None if a.load_pct is None else round(100.0 * bits / rate, PERCENT_DIGITS)
-        return replace(b, frames=a.frames + b.frames, bits=bits, load_pct=load,
-                       errors=a.errors + b.errors)  # fmt: skip
-
-    def _plot(self, rows: list[HealthSecond], first_t: float, last_t: float) -> None:
+        ``last_t``: its first and last record's time (where the first state begins, where the
+        last, partial second ends)."""
         if not rows:
             return
         secs = np.array([r.second for r in rows], dtype=np.float64)

@@ -211,7 +211,7 @@ class _Bus:
         "unanswered_per_s",
     )
 
-    def __init__(self, bus: str, index: int, rates: BusRates) -> None:
+    def __init__(self, bus: str, index: int) -> None:
         base = ent.bus_path(bus)
         self.errors = Columns(f"{base}/{ent.ERRORS}", TEXT)
         health = f"{base}/{ent.HEALTH}"
@@ -224,7 +224,7 @@ class _Bus:
             ent.health_style(ent.UNANSWERED_PER_S, bus, index),
             frame=False,
         )
-        self.health = BusHealthColumns(bus, index, rates)
+        self.health = BusHealthColumns(bus, index)
         self.highest_latency = 0.0  # the latency plot's y range leaves room above it
         self.first_t = math.inf  # the bus's first record: where its controller state begins
         self.last_t = -math.inf  # the bus's last record: where the last, partial second ends
@@ -572,7 +572,7 @@ class RerunListener(Listener):
             if name not in self.buses:
                 self._bus(name)
         for name, bus in self.buses.items():
-            bus.health.add(seconds.get(name, []), bus.first_t, bus.last_t, final)
+            bus.health.add(seconds.get(name, []), bus.first_t, bus.last_t)
             bus.count_seconds(final)
             out += bus.columns()
         if self.session_errors is not None:
@@ -718,7 +718,7 @@ class RerunListener(Listener):
         return self.grippers.get((rec.bus, rec.device)) or self._gripper(rec.bus, rec.device)
 
     def _bus(self, name: str) -> _Bus:
-        bus = self.buses[name] = _Bus(name, len(self.buses), self.health.rates)
+        bus = self.buses[name] = _Bus(name, len(self.buses))
         self.layout = self.layout.with_bus(name)
         return bus
 
