@@ -12,7 +12,6 @@ import threading
 import time
 import tty
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +22,7 @@ from plot_checks import check_bus_health
 from rerun_inputs import CASES, INPUTS, TIMED, Collector
 from rrd_helpers import Rrd, blueprint_text, read_rrd, shared_time_range, views
 
-from analyzer.health.rates import BusRates
-from analyzer.health.seconds import HealthSecond
+from analyzer.health.seconds import SecondLog
 from analyzer.model import StateSample
 from analyzer.plot.blueprint import ELECTRIC_PAGE, LEGEND_ROOM, MOTION_PAGE, Layout, blueprint
 from analyzer.plot.health import BusHealthColumns
@@ -682,16 +680,21 @@ def test_a_live_listener_flushes_on_its_timer_while_the_session_is_busy(tmp_path
     assert [(frame, value) for _, frame, value in rows] == [(1, 10), (2, 11)]
 
 
-def test_a_serial_second_handed_out_in_two_parts_is_plotted_once() -> None:
-    """A serial line's second counted from its reads, then from records that came later: one
-    point, plotted once the records have passed the second, the parts added up."""
-    columns = BusHealthColumns("rs485", 0, BusRates())
-    first = HealthSecond("rs485", "serial", 100, 3, 300, round(300 / 1152, 3), 0, None, None)
-    columns.add([first], 100.0, 100.9, final=False)  # the records are still in second 100
+def test_a_serial_second_counted_from_reads_then_records_is_plotted_once() -> None:
+    """A serial line's second counted from its reads, then from records that came later: the
+    bus health hands it out once the records have passed it, and it is one point."""
+    log = SecondLog("rs485", "serial", 115_200, None)
+    columns = BusHealthColumns("rs485", 0)
+    log.read(100, 300)
+    log.frames(100, 3, 0)
+    columns.add(log.take(), 100.0, 100.9)  # the records are still in second 100
     assert not columns.series["frames_per_s"].values
-    more = replace(first, frames=2, bits=200, load_pct=round(200 / 1152, 3), errors=1)
-    columns.add([more], 100.0, 101.2, final=False)
+    log.read(101, 100)
+    log.frames(100, 2, 0)
+    log.error(100, ("bad_checksum",))
+    log.frames(101, 1, 0)
+    columns.add(log.take(), 100.0, 101.2)
     assert list(columns.series["frames_per_s"].values) == [5.0]
     assert list(columns.series["errors_per_s"].values) == [1.0]
-    assert list(columns.series["load_pct"].values) == [round(500 / 1152, 3)]
+    assert list(columns.series["load_pct"].values) == [round(300 / 1152, 3)]
     assert list(columns.series["load_pct"].t) == [101.0]
