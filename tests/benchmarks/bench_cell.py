@@ -13,8 +13,9 @@ Per input, the real CLI in a subprocess, the runs interleaved (run 1 of every ca
   (b) stats    ``stats --format json`` as users run it: health and cycles included;
   (c) bare     the same ``stats`` with the health and cycles listeners replaced by inert ones
                that want nothing (no raw items, no states: what the session does only for
-               them, such as the Tracker, counts as theirs; this file run as ``bench_cell.py --bare-stats ARGS...``: the real CLI's
-               ``main`` in its own process, nothing added to the product for it);
+               them, such as the Tracker's samples, counts as theirs); this file run as
+               ``bench_cell.py --bare-stats ARGS...``: the real CLI's ``main`` in its own
+               process, nothing added to the product for it;
   (d) cycles   ``cycles --format jsonl -o FILE``.
 
 ``stats`` and ``cycles`` run with the engine ``auto``: the native core wherever it decodes a

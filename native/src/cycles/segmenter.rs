@@ -1,0 +1,293 @@
+//! analyzer/cycles/segmenter.py: each gripper's timeline cut into cycles. The Python is the
+//! reference (its text says how); this is the same code for the native session's samples,
+//! with the same order of grippers, events and cycles.
+
+use super::rules::{is_stop, watch, Command, Context, Decided, Mark, Watch};
+use crate::hash::FastMap;
+use std::sync::Arc;
+
+/// A reading's values: `listener.FIELDS` (state, opening, force, fault, force_setting,
+/// max_opening, min_opening), None where the frame did not carry one.
+pub type Values = [Option<i64>; 7];
+
+/// A gripper: (bus, device).
+pub type Key = (Arc<str>, i64);
+
+/// One event of a gripper's timeline, in seq order.
+#[derive(Clone, Debug)]
+pub enum Event<P> {
+    Command(Command<P>),
+    /// the response (`seq`) to the request `request`
+    Answer {
+        seq: i64,
+        t: Option<f64>,
+        request: i64,
+        refused: bool,
+        garbled: bool,
+    },
+    /// a reading; `kind`: which fields it carries (its holder)
+    Reading {
+        seq: i64,
+        t: Option<f64>,
+        values: Values,
+        kind: u16,
+    },
+}
+
+impl<P> Event<P> {
+    fn seq(&self) -> i64 {
+        match self {
+            Event::Command(c) => c.seq,
+            Event::Answer { seq, .. } | Event::Reading { seq, .. } => *seq,
+        }
+    }
+
+    fn t(&self) -> Option<f64> {
+        match self {
+            Event::Command(c) => c.t,
+            Event::Answer { t, .. } | Event::Reading { t, .. } => *t,
+        }
+    }
+}
+
+struct Gripper<P> {
+    device: i64,
+    context: Context,
+    watch: Option<Watch<P>>,
+    heard: bool,
+    /// the last values of each kind of reading
+    holders: Vec<(u16, Option<Values>)>,
+}
+
+/// Cuts every gripper's events into cycles (`segmenter.Segmenter`).
+pub struct Segmenter<P> {
+    index: FastMap<Key, usize>,
+    keys: Vec<Key>,
+    grippers: Vec<Gripper<P>>,
+    /// the cycles that ended, with their bus (for the order of those that end together)
+    cycles: Vec<(Arc<str>, Decided<P>)>,
+}
+
+impl<P: Clone> Default for Segmenter<P> {
+    fn default() -> Self {
+        Segmenter {
+            index: FastMap::default(),
+            keys: Vec::new(),
+            grippers: Vec::new(),
+            cycles: Vec::new(),
+        }
+    }
+}
+
+impl<P: Clone> Segmenter<P> {
+    /// The gripper's number (made when new: the Python's `_gripper`).
+    pub fn gripper(&mut self, key: &Key) -> usize {
+        if let Some(&i) = self.index.get(key) {
+            return i;
+        }
+        self.keys.push(key.clone());
+        self.grippers.push(Gripper {
+            device: key.1,
+            context: Context::default(),
+            watch: None,
+            heard: false,
+            holders: Vec::new(),
+        });
+        self.index.insert(key.clone(), self.grippers.len() - 1);
+        self.grippers.len() - 1
+    }
+
+    /// One batch (`Segmenter.feed`): `readings` per gripper number (in the order the grippers
+    /// first appear in the batch's samples; each list in seq order), and the
+    /// `(bus, device, event)` of its commands and answers.
+    pub fn feed(
+        &mut self,
+        mut readings: Vec<(usize, Vec<Event<P>>)>,
+        commands: Vec<(Key, Event<P>)>,
+    ) {
+        let mut per: Vec<(usize, Vec<Event<P>>)> = Vec::new();
+        let mut slot: FastMap<usize, usize> = FastMap::default();
+        for (key, event) in commands {
+            let targets = match &event {
+                Event::Command(c) if c.broadcast => self.broadcast_keys(&key.0, &readings),
+                _ => vec![self.gripper(&key)],
+            };
+            for g in targets {
+                let i = *slot.entry(g).or_insert_with(|| {
+                    per.push((g, Vec::new()));
+                    per.len() - 1
+                });
+                per[i].1.push(event.clone());
+            }
+        }
+        for (g, mut events) in per {
+            if let Some(i) = readings.iter().position(|(r, _)| *r == g) {
+                events.append(&mut readings.remove(i).1);
+            }
+            events.sort_by_key(Event::seq); // stable: a command before its record's sample
+            self.run(g, &events);
+        }
+        for (g, mut events) in readings {
+            events.sort_by_key(Event::seq);
+            self.run(g, &events);
+        }
+    }
+
+    /// The grippers a broadcast on `bus` goes to: those heard so far and those with readings
+    /// in this batch, in (bus, device) order.
+    fn broadcast_keys(
+        &mut self,
+        bus: &Arc<str>,
+        readings: &[(usize, Vec<Event<P>>)],
+    ) -> Vec<usize> {
+        let mut found: Vec<usize> = (0..self.grippers.len())
+            .filter(|&g| self.grippers[g].heard && &self.keys[g].0 == bus)
+            .chain(
+                readings
+                    .iter()
+                    .map(|(g, _)| *g)
+                    .filter(|&g| &self.keys[g].0 == bus),
+            )
+            .collect();
+        found.sort_by(|a, b| self.keys[*a].cmp(&self.keys[*b]));
+        found.dedup();
+        found
+    }
+
+    /// The cycles that ended since the last call, in the order they ended (then began; then
+    /// by gripper: a broadcast's cycles end together).
+    pub fn take(&mut self) -> Vec<Decided<P>> {
+        let mut done = std::mem::take(&mut self.cycles);
+        done.sort_by(|(a_bus, a), (b_bus, b)| {
+            let a_key = (a.end.seq, a.command.seq, a_bus, a.device);
+            a_key.cmp(&(b.end.seq, b.command.seq, b_bus, b.device))
+        });
+        done.into_iter().map(|(_, c)| c).collect()
+    }
+
+    /// The end of the capture: every cycle in progress ends (in the order they began, then
+    /// by gripper).
+    pub fn finish(&mut self) -> Vec<Decided<P>> {
+        for g in 0..self.grippers.len() {
+            self.end(g, None);
+        }
+        let mut done = std::mem::take(&mut self.cycles);
+        done.sort_by(|(a_bus, a), (b_bus, b)| {
+            (a.command.seq, a_bus, a.device).cmp(&(b.command.seq, b_bus, b.device))
+        });
+        done.into_iter().map(|(_, c)| c).collect()
+    }
+
+    fn run(&mut self, g: usize, events: &[Event<P>]) {
+        for event in events {
+            match event {
+                Event::Command(cmd) => {
+                    if !cmd.broadcast || self.grippers[g].heard {
+                        self.start(g, cmd);
+                    }
+                }
+                Event::Answer {
+                    seq,
+                    request,
+                    refused,
+                    garbled,
+                    ..
+                } => {
+                    if let Some(w) = self.grippers[g].watch.as_mut() {
+                        if w.copies.contains(request) {
+                            w.answer(*seq, *refused, *garbled);
+                        }
+                    }
+                }
+                Event::Reading {
+                    seq,
+                    t,
+                    values,
+                    kind,
+                } => self.reading(g, *seq, *t, values, *kind),
+            }
+        }
+        if let (Some(w), Some(last)) = (self.grippers[g].watch.as_mut(), events.last()) {
+            w.end = Some(Mark {
+                seq: last.seq(),
+                t: last.t(),
+            });
+        }
+    }
+
+    fn reading(&mut self, g: usize, seq: i64, t: Option<f64>, values: &Values, kind: u16) {
+        let gripper = &mut self.grippers[g];
+        let undecided = gripper.watch.as_ref().is_some_and(|w| w.final_.is_none());
+        let holder = match gripper.holders.iter().position(|(k, _)| *k == kind) {
+            Some(i) => &mut gripper.holders[i].1,
+            None => {
+                gripper.holders.push((kind, None));
+                &mut gripper.holders.last_mut().expect("just pushed").1
+            }
+        };
+        if holder.as_ref() == Some(values) && !undecided {
+            return; // the same again: nothing new for a cycle already decided
+        }
+        *holder = Some(*values);
+        let [state, opening, force, fault, force_setting, max_opening, min_opening] = *values;
+        let ctx = &mut gripper.context;
+        if let Some(v) = force_setting {
+            ctx.force_setting = Some(v);
+        }
+        if let Some(v) = max_opening {
+            ctx.max_opening = v;
+        }
+        if let Some(v) = min_opening {
+            ctx.min_opening = v;
+        }
+        if state.is_none() && opening.is_none() && force.is_none() && fault.is_none() {
+            return; // a setting: no reading
+        }
+        gripper.heard = true;
+        if let Some(w) = gripper.watch.as_mut() {
+            w.reading(seq, t, state, opening, force, fault, ctx.force_setting);
+        }
+        if state.is_some() {
+            ctx.state = state;
+            ctx.state_read = true;
+        }
+        if opening.is_some() {
+            ctx.opening = opening;
+        }
+    }
+
+    fn start(&mut self, g: usize, cmd: &Command<P>) {
+        if is_stop(cmd) {
+            if let Some(w) = self.grippers[g].watch.as_mut() {
+                let mark = w.stopped(cmd.seq, cmd.t);
+                self.end(g, Some(mark));
+            }
+            return;
+        }
+        if let Some(w) = self.grippers[g].watch.as_mut() {
+            if w.accepts_retry(cmd) {
+                w.copy(cmd.seq, &cmd.fate);
+                return;
+            }
+        }
+        self.end(
+            g,
+            Some(Mark {
+                seq: cmd.seq,
+                t: cmd.t,
+            }),
+        );
+        let gripper = &mut self.grippers[g];
+        gripper.watch = Some(watch(cmd.clone(), gripper.device, &gripper.context));
+        for (_, holder) in gripper.holders.iter_mut() {
+            *holder = None; // a new cycle reads everything again
+        }
+    }
+
+    fn end(&mut self, g: usize, ended_at: Option<Mark>) {
+        if let Some(w) = self.grippers[g].watch.take() {
+            self.cycles
+                .push((self.keys[g].0.clone(), w.cycle(ended_at)));
+        }
+    }
+}
