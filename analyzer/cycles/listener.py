@@ -37,6 +37,7 @@ FIELDS: Final = (
     "min_opening",
 )
 _CANDIDATE: Final = CODES.__contains__
+_CODES: Final = sorted(CODES)
 
 
 class CyclesListener(Listener):
@@ -63,8 +64,11 @@ class CyclesListener(Listener):
         if self.output.t0 is None and len(records):
             self.output.t0 = records[0].t
         self._flush()  # the last batch's commands: it set no state
-        codes = records.column("code")
-        picked = list(compress(range(len(codes)), map(_CANDIDATE, codes)))
+        if self.native is not None:
+            picked = self.native.candidates(records, _CODES)
+        else:
+            codes = records.column("code")
+            picked = list(compress(range(len(codes)), map(_CANDIDATE, codes)))
         if not picked:
             return
         pending = self.pending

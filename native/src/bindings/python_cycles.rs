@@ -4,6 +4,7 @@
 //! (a few a batch); each ended cycle goes back as the arguments of rules.py `build_cycle`.
 //! tests/native/test_cycles_native.py requires the same cycles as the Python segmenter.
 
+use super::python_live::RecordBatch;
 use super::python_tracker::SampleBatch;
 use crate::cycles::rules::{Command, Decided};
 use crate::cycles::segmenter::{Event, Key, Segmenter, Values};
@@ -52,6 +53,15 @@ impl PyCycleSegmenter {
         }
         self.inner.feed(readings, events);
         Ok(())
+    }
+
+    /// The indexes of the records of `records` (a `RecordBatch`) whose code is one of `codes`:
+    /// the listener's candidates (`commands.CODES`), without a Python object per record.
+    fn candidates(&self, records: PyRef<'_, RecordBatch>, codes: Vec<i64>) -> Vec<usize> {
+        let records = &records.records;
+        (0..records.len())
+            .filter(|&i| records[i].code.is_some_and(|c| codes.contains(&c)))
+            .collect()
     }
 
     /// The cycles that ended since the last call, in the order they ended.
