@@ -7,9 +7,8 @@
 use super::python_live::RecordBatch;
 use super::python_tracker::SampleBatch;
 use crate::cycles::rules::{Command, Decided};
-use crate::cycles::segmenter::{Event, Key, Segmenter, Values};
+use crate::cycles::segmenter::{Event, Key, Reading, Segmenter, Values};
 use crate::generated::cycles::FIELDS;
-use crate::hash::FastMap;
 use crate::session::tracker::{Sample, Slot};
 use pyo3::exceptions::PyTypeError;
 use pyo3::intern;
@@ -76,37 +75,33 @@ impl PyCycleSegmenter {
 }
 
 impl PyCycleSegmenter {
-    /// The batch's readings per gripper, grippers in the order they first appear (made in
-    /// that order, as the Python's `holder` calls make them).
-    fn readings(&mut self, samples: &[Sample]) -> PyResult<Vec<(usize, Vec<Event<Payload>>)>> {
+    /// The batch's readings, in the order of its samples, their grippers numbered in the
+    /// order they first appear (made in that order, as the Python's `holder` calls make them).
+    fn readings(&mut self, samples: &[Sample]) -> PyResult<Vec<Reading>> {
         let wanted = FIELDS.iter().fold(0u16, |m, &f| m | 1 << f);
-        let mut found: Vec<(usize, Vec<Event<Payload>>)> = Vec::new();
-        let mut place: FastMap<usize, usize> = FastMap::default();
+        let mut found: Vec<Reading> = Vec::new();
         let mut last: Option<(&Arc<str>, i64, usize)> = None;
         for s in samples {
             let kind = s.changed.iter().fold(0u16, |m, f| m | 1 << f) & wanted;
             if kind == 0 {
                 continue;
             }
-            let g = match last {
+            let gripper = match last {
                 Some((bus, device, g)) if Arc::ptr_eq(bus, &s.bus) && device == s.device => g,
                 _ => {
                     let key: Key = (s.bus.clone(), s.device);
                     self.inner.gripper(&key)
                 }
             };
-            last = Some((&s.bus, s.device, g));
+            last = Some((&s.bus, s.device, gripper));
             let mut values: Values = [None; 7];
             for (value, &field) in values.iter_mut().zip(FIELDS.iter()) {
                 if kind & 1 << field != 0 {
                     *value = int_of(&s.values.slots[field])?;
                 }
             }
-            let i = *place.entry(g).or_insert_with(|| {
-                found.push((g, Vec::new()));
-                found.len() - 1
-            });
-            found[i].1.push(Event::Reading {
+            found.push(Reading {
+                gripper,
                 seq: s.seq,
                 t: s.t,
                 values,

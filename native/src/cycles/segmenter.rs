@@ -1,6 +1,7 @@
 //! analyzer/cycles/segmenter.py: each gripper's timeline cut into cycles. The Python is the
 //! reference (its text says how); this is the same code for the native session's samples,
-//! with the same order of grippers, events and cycles.
+//! run in one pass over a batch (see `Segmenter::feed`), giving the same cycles in the same
+//! order.
 
 use super::rules::{is_stop, watch, Command, Context, Decided, Mark, Watch};
 use crate::hash::FastMap;
@@ -13,7 +14,7 @@ pub type Values = [Option<i64>; 7];
 /// A gripper: (bus, device).
 pub type Key = (Arc<str>, i64);
 
-/// One event of a gripper's timeline, in seq order.
+/// A command or an answer to a gripper.
 #[derive(Clone, Debug)]
 pub enum Event<P> {
     Command(Command<P>),
@@ -25,29 +26,32 @@ pub enum Event<P> {
         refused: bool,
         garbled: bool,
     },
-    /// a reading; `kind`: which fields it carries (its holder)
-    Reading {
-        seq: i64,
-        t: Option<f64>,
-        values: Values,
-        kind: u16,
-    },
 }
 
 impl<P> Event<P> {
     fn seq(&self) -> i64 {
         match self {
             Event::Command(c) => c.seq,
-            Event::Answer { seq, .. } | Event::Reading { seq, .. } => *seq,
+            Event::Answer { seq, .. } => *seq,
         }
     }
 
     fn t(&self) -> Option<f64> {
         match self {
             Event::Command(c) => c.t,
-            Event::Answer { t, .. } | Event::Reading { t, .. } => *t,
+            Event::Answer { t, .. } => *t,
         }
     }
+}
+
+/// A reading of gripper number `gripper`; `kind`: which fields it carries (its holder).
+#[derive(Clone, Debug)]
+pub struct Reading {
+    pub gripper: usize,
+    pub seq: i64,
+    pub t: Option<f64>,
+    pub values: Values,
+    pub kind: u16,
 }
 
 struct Gripper<P> {
@@ -97,55 +101,75 @@ impl<P: Clone> Segmenter<P> {
         self.grippers.len() - 1
     }
 
-    /// One batch (`Segmenter.feed`): `readings` per gripper number (in the order the grippers
-    /// first appear in the batch's samples; each list in seq order), and the
-    /// `(bus, device, event)` of its commands and answers.
-    pub fn feed(
-        &mut self,
-        mut readings: Vec<(usize, Vec<Event<P>>)>,
-        commands: Vec<(Key, Event<P>)>,
-    ) {
-        let mut per: Vec<(usize, Vec<Event<P>>)> = Vec::new();
-        let mut slot: FastMap<usize, usize> = FastMap::default();
+    /// One batch (`Segmenter.feed`): its `readings` in the order of its samples (their
+    /// grippers numbered by `gripper`, in the order they first appear, as the Python's
+    /// `holder` calls make them), and the `(bus, device, event)` of its commands and answers.
+    ///
+    /// The Python runs each gripper's events in seq order, a command before the reading of its
+    /// own record, one gripper after another; a gripper's run touches no other gripper, so
+    /// this runs every event in one pass in that order instead (the cycles that end are
+    /// sorted by `take` whatever the order they ended in).
+    pub fn feed(&mut self, mut readings: Vec<Reading>, commands: Vec<(Key, Event<P>)>) {
+        let mut targeted: Vec<(usize, Event<P>)> = Vec::with_capacity(commands.len());
         for (key, event) in commands {
-            let targets = match &event {
-                Event::Command(c) if c.broadcast => self.broadcast_keys(&key.0, &readings),
-                _ => vec![self.gripper(&key)],
-            };
-            for g in targets {
-                let i = *slot.entry(g).or_insert_with(|| {
-                    per.push((g, Vec::new()));
-                    per.len() - 1
-                });
-                per[i].1.push(event.clone());
+            match &event {
+                Event::Command(c) if c.broadcast => {
+                    for g in self.broadcast_keys(&key.0, &readings) {
+                        targeted.push((g, event.clone()));
+                    }
+                }
+                _ => {
+                    let g = self.gripper(&key);
+                    targeted.push((g, event));
+                }
             }
         }
-        for (g, mut events) in per {
-            if let Some(i) = readings.iter().position(|(r, _)| *r == g) {
-                events.append(&mut readings.remove(i).1);
-            }
-            events.sort_by_key(Event::seq); // stable: a command before its record's sample
-            self.run(g, &events);
+        targeted.sort_by_key(|(_, e)| e.seq()); // stable: in the order they came
+        if !readings.is_sorted_by_key(|r| r.seq) {
+            readings.sort_by_key(|r| r.seq);
         }
-        for (g, mut events) in readings {
-            events.sort_by_key(Event::seq);
-            self.run(g, &events);
+        let mut last: FastMap<usize, Mark> = FastMap::default();
+        let mut commands = targeted.iter().peekable();
+        for r in &readings {
+            while let Some((g, event)) = commands.next_if(|(_, e)| e.seq() <= r.seq) {
+                self.event(*g, event);
+                last.insert(
+                    *g,
+                    Mark {
+                        seq: event.seq(),
+                        t: event.t(),
+                    },
+                );
+            }
+            self.reading(r.gripper, r.seq, r.t, &r.values, r.kind);
+            last.insert(r.gripper, Mark { seq: r.seq, t: r.t });
+        }
+        for (g, event) in commands {
+            self.event(*g, event);
+            last.insert(
+                *g,
+                Mark {
+                    seq: event.seq(),
+                    t: event.t(),
+                },
+            );
+        }
+        for (g, mark) in last {
+            if let Some(w) = self.grippers[g].watch.as_mut() {
+                w.end = Some(mark); // the last frame of the gripper's this batch
+            }
         }
     }
 
     /// The grippers a broadcast on `bus` goes to: those heard so far and those with readings
     /// in this batch, in (bus, device) order.
-    fn broadcast_keys(
-        &mut self,
-        bus: &Arc<str>,
-        readings: &[(usize, Vec<Event<P>>)],
-    ) -> Vec<usize> {
+    fn broadcast_keys(&mut self, bus: &Arc<str>, readings: &[Reading]) -> Vec<usize> {
         let mut found: Vec<usize> = (0..self.grippers.len())
             .filter(|&g| self.grippers[g].heard && &self.keys[g].0 == bus)
             .chain(
                 readings
                     .iter()
-                    .map(|(g, _)| *g)
+                    .map(|r| r.gripper)
                     .filter(|&g| &self.keys[g].0 == bus),
             )
             .collect();
@@ -178,40 +202,27 @@ impl<P: Clone> Segmenter<P> {
         done.into_iter().map(|(_, c)| c).collect()
     }
 
-    fn run(&mut self, g: usize, events: &[Event<P>]) {
-        for event in events {
-            match event {
-                Event::Command(cmd) => {
-                    if !cmd.broadcast || self.grippers[g].heard {
-                        self.start(g, cmd);
-                    }
+    /// A command or an answer to gripper `g`.
+    fn event(&mut self, g: usize, event: &Event<P>) {
+        match event {
+            Event::Command(cmd) => {
+                if !cmd.broadcast || self.grippers[g].heard {
+                    self.start(g, cmd);
                 }
-                Event::Answer {
-                    seq,
-                    request,
-                    refused,
-                    garbled,
-                    ..
-                } => {
-                    if let Some(w) = self.grippers[g].watch.as_mut() {
-                        if w.copies.contains(request) {
-                            w.answer(*seq, *refused, *garbled);
-                        }
-                    }
-                }
-                Event::Reading {
-                    seq,
-                    t,
-                    values,
-                    kind,
-                } => self.reading(g, *seq, *t, values, *kind),
             }
-        }
-        if let (Some(w), Some(last)) = (self.grippers[g].watch.as_mut(), events.last()) {
-            w.end = Some(Mark {
-                seq: last.seq(),
-                t: last.t(),
-            });
+            Event::Answer {
+                seq,
+                request,
+                refused,
+                garbled,
+                ..
+            } => {
+                if let Some(w) = self.grippers[g].watch.as_mut() {
+                    if w.copies.contains(request) {
+                        w.answer(*seq, *refused, *garbled);
+                    }
+                }
+            }
         }
     }
 
