@@ -302,3 +302,57 @@ impl<P: Clone> Segmenter<P> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generated::cycles::{ANSWERED, CATCH, GRIPPED, UNFINISHED};
+
+    fn catch(seq: i64) -> Event<()> {
+        Event::Command(Command {
+            seq,
+            t: Some(seq as f64 / 100.0),
+            kind: CATCH.to_owned(),
+            target: None,
+            fate: ANSWERED.to_owned(),
+            broadcast: false,
+            retransmission: false,
+            same: vec![1, 2, 3],
+            payload: (),
+        })
+    }
+
+    fn reading(gripper: usize, seq: i64, state: i64, opening: i64) -> Reading {
+        let mut values: Values = [None; 7];
+        values[0] = Some(state);
+        values[1] = Some(opening);
+        Reading {
+            gripper,
+            seq,
+            t: Some(seq as f64 / 100.0),
+            values,
+            kind: 0b11,
+        }
+    }
+
+    #[test]
+    fn a_catch_that_stops_on_the_force_limit_is_gripped_at_its_width() {
+        let mut s: Segmenter<()> = Segmenter::default();
+        let key: Key = (Arc::from("can0"), 1);
+        let g = s.gripper(&key);
+        s.feed(vec![reading(g, 0, 1, 1000)], vec![]);
+        let moving = (2..6).map(|i| reading(g, i, 4, 1000 - 100 * i));
+        let readings = moving.chain([reading(g, 6, 6, 450), reading(g, 7, 6, 450)]);
+        s.feed(readings.collect(), vec![(key.clone(), catch(1))]);
+        assert!(s.take().is_empty(), "a cycle ends at the next command");
+        s.feed(vec![], vec![(key, catch(8))]);
+        let done = s.take();
+        assert_eq!(done.len(), 1);
+        let c = &done[0];
+        assert_eq!((c.outcome, c.width, c.end.seq), (GRIPPED, Some(450), 8));
+        assert_eq!(c.evidence, vec![1, 6]);
+        let rest = s.finish();
+        assert_eq!(rest.len(), 1);
+        assert_eq!(rest[0].outcome, UNFINISHED);
+    }
+}
