@@ -89,7 +89,13 @@ class _Open:
 
 class SecondLog:
     """One bus's seconds: counted as they come (in any order within the open ones), handed out
-    by ``take`` once the bus has moved past them."""
+    by ``take`` once the bus has moved past them, each second once.
+
+    What moves a bus past a second is a frame or an event in a later one. A serial line's reads
+    do not: its records come after the reads they were found in (a framer holds a frame's bytes
+    until it can decide), so a second is over once the line's records have passed it. Anything
+    that still comes for a second already handed out (a record decided late) is counted in the
+    first second still open, so every frame, bit and error is in exactly one row."""
 
     def __init__(self, bus: str, kind: str, rate: int, state: str | None) -> None:
         self.bus = bus
@@ -97,21 +103,31 @@ class SecondLog:
         self.rate = rate
         self.state = state  # CAN: the controller's state carried from second to second
         self.open: dict[int, _Open] = {}
-        self.latest: int | None = None  # the latest second seen
+        self.latest: int | None = None  # the latest second that moved the bus on
+        self.taken: int | None = None  # the seconds before this one were handed out
 
     def frames(self, second: int, frames: int, bits: int) -> None:
-        row = self._at(second)
+        row = self._at(self._open(second))
         row.frames += frames
         row.bits += bits
 
+    def read(self, second: int, bits: int) -> None:
+        """A serial line's bytes read in ``second`` (they do not move the line on)."""
+        second = self._open(second)
+        row = self.open.get(second)
+        if row is None:
+            row = self.open[second] = _Open(self.state)
+        row.bits += bits
+
     def error(self, second: int, keys: tuple[str, ...]) -> None:
-        row = self._at(second)
+        row = self._at(self._open(second))
         row.errors += 1
         for key in keys:
             row.event(key)
 
     def controller(self, second: int, report: ErrorReport) -> None:
         """A CAN error frame: its classes, and the state it reports from its second on."""
+        second = self._open(second)
         self.error(second, report.keys)
         state = report.state
         if state is not None:
@@ -124,14 +140,26 @@ class SecondLog:
 
     def event(self, second: int, key: str) -> None:
         """An event that is no error of a frame (Modbus frames too close)."""
-        self._at(second).event(key)
+        self._at(self._open(second)).event(key)
 
     def take(self, final: bool = False) -> list[HealthSecond]:
         """The seconds before the latest one (all of them when ``final``), in order."""
-        if self.latest is None:
+        if final:
+            done = sorted(self.open)
+            upto = done[-1] + 1 if done else self.taken
+        elif self.latest is None:
             return []
-        done = sorted(s for s in self.open if final or s < self.latest)
+        else:
+            done = sorted(s for s in self.open if s < self.latest)
+            upto = self.latest
+        if upto is not None:
+            self.taken = upto if self.taken is None else max(upto, self.taken)
         return [self._row(s, self.open.pop(s)) for s in done]
+
+    def _open(self, second: int) -> int:
+        """``second``, or the first one still open when it was handed out already."""
+        taken = self.taken
+        return second if taken is None or second >= taken else taken
 
     def _at(self, second: int) -> _Open:
         row = self.open.get(second)

@@ -66,7 +66,7 @@ class SerialLine:
         second = math.floor(t)
         self.seconds[second] += n * LINE_BITS_PER_BYTE
         if self.log is not None:
-            self.log.frames(second, 0, n * LINE_BITS_PER_BYTE)
+            self.log.read(second, n * LINE_BITS_PER_BYTE)
         begun = t - n * self.byte_time_s
         if self.first_t is None or begun < self.first_t:
             self.first_t = begun

@@ -16,7 +16,7 @@ from scenario_capture import record_scenarios
 from test_error_frames import episode_log
 
 from analyzer.health.listener import HealthListener
-from analyzer.health.seconds import HealthSecond
+from analyzer.health.seconds import HealthSecond, SecondLog
 from analyzer.session.capture import CaptureOptions, run_capture
 from analyzer.session.listener import Listener
 
@@ -127,3 +127,24 @@ def test_the_simulated_modbus_line_keeps_its_silence(bus_off_recording: Path) ->
     assert line["closer_than_t3_5"] <= line["frames"] // 50
     (turnaround,) = line["turnaround_ms"]
     assert turnaround["median"] >= line["modbus_t3_5_ms"]
+
+
+def test_a_serial_second_is_handed_out_once_its_records_have_passed() -> None:
+    """A line's reads come before the records found in them, and a framer may decide a frame
+    late: a second is over only when the line's records have passed it, and a record decided
+    after its second was handed out is counted in the first one still open."""
+    log = SecondLog("rs485", "serial", 115_200, None)
+    log.read(4, 80)
+    log.read(5, 80)
+    assert log.take() == [], "reads alone do not end a second"
+    log.frames(4, 1, 0)
+    assert log.take() == []
+    log.frames(5, 1, 0)
+    (four,) = log.take()
+    assert (four.second, four.frames, four.bits) == (4, 1, 80)
+    log.frames(4, 1, 0)  # decided late
+    log.error(3, ("bad_checksum",))
+    (five,) = log.take(final=True)
+    assert (five.second, five.frames, five.bits, five.errors, five.worst) == (
+        5, 2, 80, 1, "bad checksum")  # fmt: skip
+    assert log.take(final=True) == []
