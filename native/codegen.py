@@ -26,6 +26,10 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # run as a script from anywhere: the project's modules first
     sys.path.insert(0, str(ROOT))
 
+from analyzer.cycles import commands as cycle_commands  # noqa: E402
+from analyzer.cycles import listener as cycle_listener  # noqa: E402
+from analyzer.cycles import model as cycle_model  # noqa: E402
+from analyzer.cycles import rules as cycle_rules  # noqa: E402
 from analyzer.session import tracker  # noqa: E402
 from analyzer.sinks import csv as csv_sink  # noqa: E402
 from decoders import (  # noqa: E402
@@ -591,6 +595,23 @@ def csv_module() -> list[str]:
     return module("csv", "analyzer/sinks/csv.py: the CSV columns.", body)
 
 
+def cycles_module() -> list[str]:
+    words = [(cycle_commands, n) for n in ("ANSWERED", "NOBODY", "STOPPED_FIRST")]
+    words += [(cycle_commands, n) for n in ("CATCH", "RELEASE", "STOP")]
+    words += [(cycle_model, n.upper()) for n in cycle_model.OUTCOMES]
+    words += [(cycle_model, n) for n in ("STATE", "OPENING", "FORCE", "TIME", "SLIP")]
+    words += [(cycle_model, "NOT_ANSWERED")]  # the warning (commands.py's is a fate)
+    texts = [const(n, "&str", rs_str(getattr(mod, n)))[0] for mod, n in words]
+    ints = ("AT_TARGET", "SLIP_MARGIN", "FULLY_OPEN", "FULLY_CLOSED", "STOPPED_IDLE", "GRIPPING")
+    numbers = [const(n, "i64", str(getattr(cycle_rules, n)))[0] for n in ints]
+    numbers += const("CONTACT_FORCE", "f64", rs_float(cycle_rules.CONTACT_FORCE))
+    fields = [f"super::tracker::{name.upper()}" for name in cycle_listener.FIELDS]
+    note = "listener.py FIELDS: the state slots a reading's values are, in order."
+    body = [*texts, "", *numbers, "", *array("FIELDS", "usize", fields, note)]
+    note = "analyzer/cycles/ (commands.py, model.py, rules.py, listener.py): kinds, fates, words."
+    return module("cycles", note, body)
+
+
 def render() -> str:
     lines = [
         HEADER,
@@ -610,6 +631,7 @@ def render() -> str:
         lint_module,
         csv_module,
         messages_module,
+        cycles_module,
     ):
         lines += part()
     return "\n".join(lines) + "\n"

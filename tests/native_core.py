@@ -23,6 +23,7 @@ CORE_API = (
     "Unsupported",
     "CandumpFrames",
     "CanStage",
+    "CycleSegmenter",
     "Tracker",
     "RecordBatch.column",
     "RecordBatch.error_count",

@@ -16,8 +16,10 @@ from __future__ import annotations
 from itertools import compress, repeat
 from typing import TYPE_CHECKING, Any, Final
 
+from ..session.engine import _native
 from ..session.listener import Listener
 from .commands import CODES, answer_of, command_of
+from .rules import build_cycle
 from .segmenter import COMMAND, READING, Event, Segmenter
 
 if TYPE_CHECKING:
@@ -35,6 +37,7 @@ FIELDS: Final = (
     "min_opening",
 )
 _CANDIDATE: Final = CODES.__contains__
+_CODES: Final = sorted(CODES)
 
 
 class CyclesListener(Listener):
@@ -47,16 +50,25 @@ class CyclesListener(Listener):
         self.output = output
         self.device = device
         self.segmenter = Segmenter()
+        self.native: Any = None  # the native core's segmenter, on the native engine
+        self.started = False  # records came (the first ones say which engine)
         self.pending: list[tuple[str, int, Event]] = []  # this batch's commands and answers
         self.count = 0
         self.label = getattr(output, "label", "cycles output")
 
     def on_records(self, records: RecordSequence) -> None:
-        self._flush()  # the last batch's commands: it set no state
+        if not self.started and len(records):
+            self.started = True
+            if _native is not None and isinstance(records, _native.RecordBatch):
+                self.native = _native.CycleSegmenter()  # the first records say the engine
         if self.output.t0 is None and len(records):
             self.output.t0 = records[0].t
-        codes = records.column("code")
-        picked = list(compress(range(len(codes)), map(_CANDIDATE, codes)))
+        self._flush()  # the last batch's commands: it set no state
+        if self.native is not None:
+            picked = self.native.candidates(records, _CODES)
+        else:
+            codes = records.column("code")
+            picked = list(compress(range(len(codes)), map(_CANDIDATE, codes)))
         if not picked:
             return
         pending = self.pending
@@ -66,6 +78,11 @@ class CyclesListener(Listener):
                 pending.append((found.bus, found.device, (found.seq, COMMAND, found.t, found)))
 
     def on_states(self, samples: SampleSequence) -> None:
+        if self.native is not None:
+            self.native.feed(samples, self.pending)
+            self.pending = []
+            self._write(self._built(self.native.take()))
+            return
         readings: dict[tuple[str, int], list[Event]] = {}
         holder = self.segmenter.holder
         for bus, device, names, times, seqs, columns in samples.series(FIELDS):
@@ -88,14 +105,26 @@ class CyclesListener(Listener):
 
     def close(self) -> None:
         self._flush()
-        self._write(self.segmenter.finish())
+        if self.native is not None:
+            self._write(self._built(self.native.finish()))
+        else:
+            self._write(self.segmenter.finish())
         self.output.close()
 
     def _flush(self) -> None:
-        if self.pending:
+        if not self.pending:
+            return
+        if self.native is not None:
+            self.native.feed(None, self.pending)
+            self._write(self._built(self.native.take()))
+        else:
             self.segmenter.feed({}, self.pending)
-            self.pending = []
             self._write(self.segmenter.take())
+        self.pending = []
+
+    @staticmethod
+    def _built(rows: list[tuple[Any, ...]]) -> list[Any]:
+        return [build_cycle(*row) for row in rows]
 
     def _write(self, cycles: list[Any]) -> None:
         if self.device is not None:

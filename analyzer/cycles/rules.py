@@ -268,25 +268,23 @@ class Watch:
         outcome, evidence = self._outcome(ended_by_capture=ended_at is None)
         cmd = self.command
         end = ended_at or self.end or Mark(cmd.seq, cmd.t)
-        return Cycle(
-            bus=cmd.bus,
-            device=self.device,
-            start_t=cmd.t,
-            end_t=end.t,
-            start_seq=cmd.seq,
-            end_seq=end.seq,
-            command=cmd.words,
-            target_mm=opening_mm(self.target),
-            outcome=outcome,
-            width_mm=None if self.width is None else opening_mm(self.width),
-            force_peak=self.force_peak,
-            time_to_contact_ms=self._ms(self.contact),
-            settle_ms=self._ms(self._settled(outcome)),
-            retries=len(self.copies) - 1,
-            faults=fault_text(self.faults),
-            warnings=self._warnings(outcome),
-            unknown=self._unknown(),
-            evidence=sorted(set(evidence)),
+        contact, settled = self.contact, self._settled(outcome)
+        return build_cycle(
+            cmd,
+            self.device,
+            self.target,
+            outcome,
+            end.seq,
+            end.t,
+            self.width,
+            self.force_peak,
+            None if contact is None else contact.t,
+            None if settled is None else settled.t,
+            len(self.copies) - 1,
+            self.faults,
+            self._warnings(outcome),
+            self._unknown(),
+            sorted(set(evidence)),
         )
 
     def _outcome(self, ended_by_capture: bool) -> tuple[str, list[int]]:
@@ -340,12 +338,6 @@ class Watch:
             return self.final or self.at_target
         return self.final if outcome == STOPPED and self.stop is None else None
 
-    def _ms(self, mark: Mark | None) -> float | None:
-        start = self.command.t
-        if mark is None or mark.t is None or start is None:
-            return None
-        return round((mark.t - start) * 1000.0, 3)
-
     def _unknown(self) -> list[str]:
         missing = [q for q in (STATE, OPENING, FORCE) if q not in self.seen]
         return missing + ([TIME] if self.command.t is None else [])
@@ -353,6 +345,53 @@ class Watch:
     @staticmethod
     def _marks(*marks: Mark | None) -> list[int]:
         return [m.seq for m in marks if m is not None]
+
+
+def build_cycle(
+    cmd: Command,
+    device: int,
+    target: int,
+    outcome: str,
+    end_seq: int,
+    end_t: float | None,
+    width: int | None,
+    force_peak: int | None,
+    contact_t: float | None,
+    settle_t: float | None,
+    retries: int,
+    faults: int,
+    warnings: list[str],
+    unknown: list[str],
+    evidence: list[int],
+) -> Cycle:
+    """A decided cycle as the outputs write it (``Watch.cycle``'s, and the native segmenter's
+    rows: ``_native.CycleSegmenter``): openings in mm, times from the command in ms."""
+    return Cycle(
+        bus=cmd.bus,
+        device=device,
+        start_t=cmd.t,
+        end_t=end_t,
+        start_seq=cmd.seq,
+        end_seq=end_seq,
+        command=cmd.words,
+        target_mm=opening_mm(target),
+        outcome=outcome,
+        width_mm=None if width is None else opening_mm(width),
+        force_peak=force_peak,
+        time_to_contact_ms=_ms(cmd.t, contact_t),
+        settle_ms=_ms(cmd.t, settle_t),
+        retries=retries,
+        faults=fault_text(faults),
+        warnings=warnings,
+        unknown=unknown,
+        evidence=evidence,
+    )
+
+
+def _ms(start: float | None, t: float | None) -> float | None:
+    if t is None or start is None:
+        return None
+    return round((t - start) * 1000.0, 3)
 
 
 def aim_of(cmd: Command, ctx: Context) -> tuple[str, int]:

@@ -32,8 +32,9 @@ READING: Final = 1
 COMMAND: Final = 0
 Event = tuple[Any, ...]
 _SEQ: Final = itemgetter(0)
-_START: Final = attrgetter("start_seq")
-_ENDED: Final = attrgetter("end_seq", "start_seq")
+# a broadcast's cycles begin and may end together: then by gripper, whatever the batches
+_START: Final = attrgetter("start_seq", "bus", "device")
+_ENDED: Final = attrgetter("end_seq", "start_seq", "bus", "device")
 
 
 class Gripper:
@@ -77,9 +78,9 @@ class Segmenter:
         for bus, device, event in commands:
             if type(event[3]) is Command and event[3].broadcast:
                 heard = {key for key, g in self.grippers.items() if g.bus == bus and g.heard}
-                keys = heard | {key for key in readings if key[0] == bus}
+                keys = sorted(heard | {key for key in readings if key[0] == bus})
             else:
-                keys = {(bus, device)}
+                keys = [(bus, device)]
             for key in keys:
                 per.setdefault(key, []).append(event)
         for key, events in per.items():
@@ -92,13 +93,13 @@ class Segmenter:
 
     def take(self) -> list[Cycle]:
         """The cycles that ended since the last call, in the order they ended (the frames
-        that ended them): the same whatever the batches."""
+        that ended them; then began; then by gripper): the same whatever the batches."""
         done, self.cycles = self.cycles, []
         return sorted(done, key=_ENDED) if len(done) > 1 else done
 
     def finish(self) -> list[Cycle]:
         """The end of the capture: every cycle in progress ends here (in the order they
-        began)."""
+        began, then by gripper)."""
         for gripper in self.grippers.values():
             self._end(gripper, None)
         done, self.cycles = self.cycles, []

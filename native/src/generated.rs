@@ -1421,3 +1421,48 @@ pub mod messages {
     pub const GARBAGE_INCOMPLETE: &str = "incomplete frame followed by a valid one";
     pub const GARBAGE_BAD_CHECKSUM: &str = "bytes of a frame-shaped candidate with a bad checksum";
 }
+
+/// analyzer/cycles/ (commands.py, model.py, rules.py, listener.py): kinds, fates, words.
+pub mod cycles {
+    pub const ANSWERED: &str = "answered";
+    pub const NOBODY: &str = "broadcast";
+    pub const STOPPED_FIRST: &str = "cut_off";
+    pub const CATCH: &str = "catch";
+    pub const RELEASE: &str = "release";
+    pub const STOP: &str = "stop";
+    pub const GRIPPED: &str = "gripped";
+    pub const CLOSED_EMPTY: &str = "closed_empty";
+    pub const OPENED: &str = "opened";
+    pub const POSITIONED: &str = "positioned";
+    pub const STOPPED: &str = "stopped";
+    pub const FAULTED: &str = "faulted";
+    pub const REFUSED: &str = "refused";
+    pub const UNANSWERED: &str = "unanswered";
+    pub const UNFINISHED: &str = "unfinished";
+    pub const UNKNOWN: &str = "unknown";
+    pub const STATE: &str = "state";
+    pub const OPENING: &str = "opening";
+    pub const FORCE: &str = "force";
+    pub const TIME: &str = "time";
+    pub const SLIP: &str = "slip";
+    pub const NOT_ANSWERED: &str = "unanswered";
+
+    pub const AT_TARGET: i64 = 10;
+    pub const SLIP_MARGIN: i64 = 10;
+    pub const FULLY_OPEN: i64 = 1;
+    pub const FULLY_CLOSED: i64 = 2;
+    pub const STOPPED_IDLE: i64 = 3;
+    pub const GRIPPING: i64 = 6;
+    pub const CONTACT_FORCE: f64 = 0.5;
+
+    /// listener.py FIELDS: the state slots a reading's values are, in order.
+    pub const FIELDS: [usize; 7] = [
+        super::tracker::STATE,
+        super::tracker::OPENING,
+        super::tracker::FORCE,
+        super::tracker::FAULT,
+        super::tracker::FORCE_SETTING,
+        super::tracker::MAX_OPENING,
+        super::tracker::MIN_OPENING,
+    ];
+}

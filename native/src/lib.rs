@@ -5,6 +5,7 @@
 //! differential tests (tests/native/) require byte-identical output from both.
 
 mod alloc;
+pub mod cycles;
 pub mod decoders;
 pub mod generated;
 pub mod hash;

@@ -54,7 +54,7 @@ impl Slot {
     }
 
     /// The value as a Python int (a bool is one), else None.
-    fn as_int(&self) -> Option<i64> {
+    pub(crate) fn as_int(&self) -> Option<i64> {
         match self {
             Slot::Int(i) => Some(*i),
             Slot::Bool(b) => Some(i64::from(*b)),

@@ -1,0 +1,112 @@
+"""The native engine's grip cycles (``_native.CycleSegmenter``, native/src/cycles/) against the
+Python ``Segmenter``, the reference: the same CAN items through real sessions on both engines,
+in batches of several sizes (a command and its readings fall in different batches), must give
+equal cycles. The inputs: random hosts written by cycle_script (every command kind, broadcasts,
+stops, unanswered writes, faults, readings of any subset of state, opening and force, several
+grippers), the benchmark's realistic and rule-breaking traffic, and two buses with foreign,
+error, remote and untimed frames."""
+
+from __future__ import annotations
+
+import random
+import sys
+from pathlib import Path
+
+import pytest
+from native_core import needs_native
+
+from analyzer.model import Item
+from decoders.model import EG2_CAN, CanFrame
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests" / "benchmarks"))
+sys.path.insert(0, str(ROOT / "tests" / "cycles"))
+from cycle_script import BROADCAST, Script, replay  # noqa: E402
+from traffic import can_frames, warning_can_frames  # noqa: E402
+
+pytestmark = needs_native
+SIZES = (1, 7, 64, 2000)
+
+
+def random_host(seed: int, steps: int = 400) -> list[Item]:
+    """A host that commands and polls three grippers (and all of them at once) at random."""
+    rng = random.Random(seed)
+    s = Script(EG2_CAN)
+    for _ in range(steps):
+        device = rng.choice((1, 2, 3, 1, 2, 3, BROADCAST[EG2_CAN]))
+        answer = rng.choice(("ok", "ok", "ok", "none"))
+        roll = rng.random()
+        if roll < 0.08:
+            s.catch(device, answer)
+        elif roll < 0.14:
+            s.release(device, answer)
+        elif roll < 0.2:
+            s.seek(rng.choice((0, 300, 500, 700, 1000, rng.randint(0, 1000))), device, answer)
+        elif roll < 0.23:
+            s.stop(device, answer)
+        elif roll < 0.25:
+            s.wait(rng.choice((0.0, 0.5, 2.0)))
+        else:
+            s.poll(
+                device=min(device, 3),
+                state=rng.choice((None, 1, 2, 3, 4, 5, 6, 6, 4)),
+                opening=rng.choice((None, 0, 1000, rng.randint(0, 1000), rng.randint(290, 310))),
+                force=rng.choice((None, 0, 40, 60, 100)),
+                fault=rng.choice((0,) * 30 + (4, 1)),
+            )
+    return s.items()
+
+
+def bench(frames: list[CanFrame]) -> list[Item]:
+    return [Item("can0", f) for f in frames]
+
+
+def two_buses(n: int) -> list[Item]:
+    """Polls on two buses with the frames real buses also carry (foreign and standard ids,
+    error and remote frames, lost replies, frames without a time)."""
+    rng = random.Random(5)
+    items = []
+    for k, f in enumerate(can_frames(n, seed=5)):
+        roll = rng.random()
+        if roll < 0.02:
+            continue
+        if roll < 0.03:
+            f = CanFrame(f.t, 0x123, b"\x01\x02", False)
+        elif roll < 0.04:
+            f = CanFrame(f.t, 0x20000004, bytes(8), is_error=True)
+        elif roll < 0.05:
+            f = CanFrame(f.t, f.arbitration_id, b"", is_remote=True, dlc=4)
+        elif roll < 0.06:
+            f = CanFrame(None, f.arbitration_id, f.data)
+        items.append(Item("can0" if k % 5 else "can1", f))
+    return items
+
+
+INPUTS = {
+    **{f"random-host-{seed}": (lambda seed=seed: random_host(seed)) for seed in range(6)},
+    "bench": lambda: bench(list(can_frames(20_000))),
+    "bench-warnings": lambda: bench(list(warning_can_frames(20_000))),
+    "two-buses": lambda: two_buses(20_000),
+}
+
+
+@pytest.mark.parametrize("name", list(INPUTS))
+def test_native_cycles_equal_the_python_ones(name: str) -> None:
+    items = INPUTS[name]()
+    reference = replay(items, EG2_CAN, "python", size=500)
+    assert reference, "an input without cycles compares nothing"
+    for size in SIZES:
+        found = replay(items, EG2_CAN, "native", size=size)
+        assert [c.to_dict() for c in found] == [c.to_dict() for c in reference], size
+
+
+def test_the_random_hosts_reach_every_outcome() -> None:
+    """The random hosts are worth comparing: between them they decide every outcome a CAN
+    host can cause (no refusal exists on CAN)."""
+    outcomes = {
+        c.outcome for seed in range(6) for c in replay(random_host(seed), EG2_CAN, "python", 500)
+    }
+    assert outcomes >= {
+        "gripped", "closed_empty", "opened", "positioned", "stopped", "faulted", "unanswered",
+        "unfinished", "unknown",
+    }  # fmt: skip
