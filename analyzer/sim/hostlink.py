@@ -32,6 +32,7 @@ SILENCE_S = 0.002  # a pause this long ends a frame (3.5 characters are 0.3 ms a
 TIMEOUT_S = 0.03
 RETRIES = 2
 MIN_GAP_S = 0.005
+ANSWER_PAUSE_S = 2 * SILENCE_S  # after an answer (twice t3.5 and more: a late tap still sees it)
 
 
 @dataclass(slots=True)
@@ -89,7 +90,7 @@ class Link:
     def _pace(self) -> None:
         # frames this far apart, and never sooner after an answer than the line's silence
         # (Modbus RTU's t3.5: a host that speaks sooner is one ``stats`` rightly flags)
-        due = max(self._last_send + self.min_gap_s, self._last_heard + SILENCE_S)
+        due = max(self._last_send + self.min_gap_s, self._last_heard + ANSWER_PAUSE_S)
         wait = due - time.monotonic()
         if wait > 0 and self.stop.wait(wait):
             raise Stopped
