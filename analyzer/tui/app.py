@@ -29,16 +29,21 @@ from textual.timer import Timer
 from textual.widgets import Footer, Input, Static, TabbedContent, TabPane
 from textual.worker import Worker, WorkerState
 
+from ..cycles.model import Cycle
 from ..model import ERROR, LEVEL_NAMES, SourceEvent
+from ..session.listener import Listener
 from ..session.session import Session
 from . import keys
 from .aggregates import Snapshot
+from .cycle_feed import cycle_frames, cycles_listener, find_frame
 from .export import export, export_format
 from .feed import TRIGGERS, TuiFeed
 from .filter import FilterError, parse
 from .layout import HEIGHT_BREAKPOINTS, WIDTH_BREAKPOINTS
 from .messages import (
     ByteSelected,
+    CycleChosen,
+    CyclesUpdate,
     FeedUpdate,
     FieldSelected,
     FilterCancelled,
@@ -47,9 +52,10 @@ from .messages import (
 )
 from .notes import Notes
 from .replay import ReplaySource, next_speed, speed_text
-from .rows import TimeMode
+from .rows import MARKER_EVIDENCE, TimeMode
 from .screens import HelpScreen, PromptScreen
 from .store import RecordStore
+from .widgets.cycles import CyclesPanel
 from .widgets.detail import DetailTree, HexPane
 from .widgets.devices import DevicePanel
 from .widgets.event_log import EventLog
@@ -66,12 +72,13 @@ PANELS_S = 0.5  # the visible panel is redrawn this often (ages, fading highligh
 
 @dataclass
 class SessionPlan:
-    """How the app gets its session: ``build(feed)`` makes it with the feed among its
-    listeners. ``live``: taps (ages by the wall clock) or a capture; ``replay``: the capture
-    source, for pause and speed; ``recorder``: where marks go; ``freeze_on``: the armed
-    trigger; ``title``: what is watched; ``notes``: what outputs say while the app runs."""
+    """How the app gets its session: ``build(listeners)`` makes it with the TUI's listeners
+    (the feed, the grip cycles) among its own. ``live``: taps (ages by the wall clock) or a
+    capture; ``replay``: the capture source, for pause and speed; ``recorder``: where marks
+    go; ``freeze_on``: the armed trigger; ``title``: what is watched; ``notes``: what outputs
+    say while the app runs."""
 
-    build: Callable[[TuiFeed], Session]
+    build: Callable[[list[Listener]], Session]
     live: bool = True
     replay: ReplaySource | None = None
     recorder: Any = None
@@ -99,7 +106,9 @@ class Eg2ScopeApp(App[int]):
         self.store = store if store is not None else RecordStore()
         self.feed = TuiFeed(self.store, live=plan.live)
         self.feed.recorder = plan.recorder
-        session = self.session = plan.build(self.feed)
+        self.cycles, self.cycle_feed = cycles_listener()
+        # the feed last: its final update (the session is over) comes after the others'
+        session = self.session = plan.build([self.cycles, self.feed])
         self.feed.states = lambda: session.tracker.states
         self.feed.counts = lambda: (session.counts.items, session.source.dropped)
         self.failure: BaseException | None = None  # what the session's thread raised
@@ -112,6 +121,7 @@ class Eg2ScopeApp(App[int]):
         self.frozen_on: int | None = None
         self.export_note = ""
         self.snapshot: Snapshot | None = None
+        self.evidence: list[int] = []  # store indices of the chosen cycle's frames
         self.panels_stale = False
         self._detail_due: int | None = None
         self._detail_timer: Timer | None = None
@@ -141,6 +151,8 @@ class Eg2ScopeApp(App[int]):
                 yield LatencyPanel(id="latency-panel")
             with TabPane("Events", id="events"):
                 yield EventLog(id="event-log")
+            with TabPane("Cycles", id="cycles"):
+                yield CyclesPanel(self.store, id="cycle-panel")
         yield Static("", id="letter-prompt")
         yield Footer(compact=True)  # compact: 80 columns hold every key
 
@@ -164,6 +176,7 @@ class Eg2ScopeApp(App[int]):
             notes.show = lambda line: self.call_from_thread(self.notify, line, timeout=10)
         self.frames.focus()
         self.feed.target = self
+        self.cycle_feed.target = self
         if self.trigger:
             self.feed.arm(self.trigger)
         self.set_interval(0.25, self.show_status)
@@ -243,6 +256,10 @@ class Eg2ScopeApp(App[int]):
             self._ended()
             self.show_panels()
 
+    def on_cycles_update(self, update: CyclesUpdate) -> None:
+        if not self.closing:
+            self.main_screen.query_one(CyclesPanel).take(update.cycles)
+
     def _ended(self) -> None:
         """The session is over: the damage its source found is said at once (a notification,
         the Events tab, the status line; ``eg2scope tui`` prints it again on exit), and the
@@ -257,6 +274,7 @@ class Eg2ScopeApp(App[int]):
         log.ended(what)
         screen.query_one(DevicePanel).ended(what)
         screen.query_one(LatencyPanel).ended(what)
+        screen.query_one(CyclesPanel).ended(what)
         self.show_status()
 
     def show_panels(self) -> None:
@@ -422,6 +440,55 @@ class Eg2ScopeApp(App[int]):
             frames.set_filter(None)
             frames.jump_to_index(index)
         frames.focus()
+
+    # -- grip cycles -------------------------------------------------------------------------
+
+    @on(CycleChosen)
+    def cycle_chosen(self, event: CycleChosen) -> None:
+        if not self.closing:  # a message that comes in while the app is taken down
+            self.show_cycle(event.cycle)
+
+    def show_cycle(self, cycle: Cycle) -> None:
+        """Select the cycle's command in the frame list and mark every frame that decided it
+        (] and [ step through them); a filter that hides the command is cleared, and said."""
+        frames, store = self.frames, self.store
+        frames.take_new(store.count)  # the store may be a batch ahead of the list
+        self.evidence = cycle_frames(store, cycle)
+        frames.evidence = frozenset(self.evidence)
+        frames.restyle()
+        start = find_frame(store, cycle.bus, cycle.start_seq)
+        if start is None:
+            self.notify(f"the cycle's command (#{cycle.start_seq} on {cycle.bus}) is not held")
+            return
+        self.go_to_index(start)
+        self.notify(
+            f"ID {cycle.device} on {cycle.bus}: {cycle.outcome}, {cycle.command}; "
+            f"{len(self.evidence)} frames decided it, marked {MARKER_EVIDENCE} (] [ step)"
+        )
+
+    def action_cycles(self) -> None:
+        self.action_tab("cycles")
+        self.main_screen.query_one(CyclesPanel).focus()
+
+    def action_next_evidence(self) -> None:
+        self._step_evidence(1)
+
+    def action_previous_evidence(self) -> None:
+        self._step_evidence(-1)
+
+    def _step_evidence(self, step: int) -> None:
+        if not self.evidence:
+            self.notify("no grip cycle chosen: Enter on one in the cycles panel (c)")
+            return
+        here = self.frames.selected
+        if here is None:
+            later = self.evidence
+        else:
+            later = [i for i in self.evidence if (i - here) * step > 0]
+        if not later:
+            self.notify(f"no {'next' if step > 0 else 'previous'} frame of this cycle")
+            return
+        self.go_to_index(later[0] if step > 0 else later[-1])
 
     # -- actions -----------------------------------------------------------------------------
 

@@ -131,8 +131,8 @@ def live_plan(
     )
     outputs = ([] if record is None else [record]) + list(extra or [])
 
-    def build(feed: Listener) -> Session:
-        return Session(source, [*outputs, feed], options)
+    def build(tui: list[Listener]) -> Session:
+        return Session(source, [*outputs, *tui], options)
 
     names = ", ".join(t.bus for t in taps)
     return SessionPlan(
@@ -164,8 +164,8 @@ def capture_plan(
     options = SessionOptions(protocol=byte_protocol(capture), engine=capture.engine)
     outputs = list(extra or [])
 
-    def build(feed: Listener) -> Session:
-        return Session(source, [*outputs, feed], options)
+    def build(tui: list[Listener]) -> Session:
+        return Session(source, [*outputs, *tui], options)
 
     return SessionPlan(
         build,

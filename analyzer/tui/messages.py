@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual.message import Message
 
 from ..model import SourceEvent
 from .aggregates import DeviceKey, Snapshot
 from .spans import Span
+
+if TYPE_CHECKING:
+    from ..cycles.model import Cycle
+    from ..health.seconds import HealthSecond
 
 
 @dataclass
@@ -48,6 +52,36 @@ class FeedUpdate(Message):
         self.captured = captured  # chunks/frames captured so far
         self.dropped = dropped
         self.done = done  # the session has ended
+
+
+class CyclesUpdate(Message):
+    """Grip cycles that ended since the last update (posted in batches from the session's
+    thread); ``done``: the session is over, every cycle has come."""
+
+    def __init__(self, cycles: list[Cycle], done: bool = False) -> None:
+        super().__init__()
+        self.cycles = cycles
+        self.done = done
+
+
+class HealthUpdate(Message):
+    """Bus-health seconds completed since the last update (one row per bus and second);
+    ``untimed``: buses whose frames have no times (no load or rate can be said); ``done``: the
+    session is over (the open seconds came too)."""
+
+    def __init__(self, seconds: list[HealthSecond], untimed: set[str], done: bool = False) -> None:
+        super().__init__()
+        self.seconds = seconds
+        self.untimed = untimed
+        self.done = done
+
+
+class CycleChosen(Message):
+    """Enter on a cycle in the cycles panel: show its frames."""
+
+    def __init__(self, cycle: Cycle) -> None:
+        super().__init__()
+        self.cycle = cycle
 
 
 class RowSelected(Message):
