@@ -12,6 +12,8 @@ it. One module per job:
 - ``serial_line``: a serial line's use, the gaps between its frames, Modbus frames closer than
   3.5 characters, each gripper's turnaround;
 - ``latency_timer``: the hint a USB adapter's latency timer leaves in read times;
+- ``seconds``: each bus second by second (``HealthSecond``: frames, bits, load, errors, the
+  controller's worst state, the worst event in words), for the TUI, Rerun and ``batch``;
 - ``bus``: the figures of one bus together, as ``stats`` reports them (docs/contracts.md);
 - ``listener``: the listener that feeds them.
 """

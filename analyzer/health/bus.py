@@ -3,11 +3,15 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, Final
 
-from .can_load import CanLoad
+from decoders.can_errors import ERROR_ACTIVE
+
+from .can_load import CanLoad, Second
 from .error_frames import ErrorFrameLog
 from .rates import Rate
+from .seconds import SecondLog
 from .serial_line import SerialLine
 
 CAN: Final = "can"
@@ -20,11 +24,24 @@ class CanBusHealth:
 
     kind = CAN
 
-    def __init__(self, bus: str, bitrate: Rate) -> None:
+    def __init__(self, bus: str, bitrate: Rate, seconds: bool = False) -> None:
         self.bus = bus
         self.rate = bitrate
         self.load = CanLoad()
         self.errors = ErrorFrameLog()
+        self.log = SecondLog(bus, CAN, bitrate.value, ERROR_ACTIVE) if seconds else None
+
+    def add(self, second: Second) -> None:
+        """One bus's frames in one second (``can_load.Second``)."""
+        self.load.add(second)
+        sec = second[1]
+        if self.log is not None and sec is not None:
+            self.log.frames(sec, second[2], second[3])
+
+    def add_error(self, t: float | None, error_class: int, data: bytes) -> None:
+        report = self.errors.add(t, error_class, data)
+        if self.log is not None and t is not None:
+            self.log.controller(math.floor(t), report)
 
     def figures(self) -> dict[str, Any]:
         load = self.load.figures(self.rate.value)
@@ -45,10 +62,17 @@ class SerialBusHealth:
 
     kind = SERIAL
 
-    def __init__(self, bus: str, baud: Rate, port: str | None = None) -> None:
+    def __init__(
+        self, bus: str, baud: Rate, port: str | None = None, seconds: bool = False
+    ) -> None:
         self.bus = bus
         self.rate = baud
-        self.line = SerialLine(baud.value, port)
+        log = SecondLog(bus, SERIAL, baud.value, None) if seconds else None
+        self.line = SerialLine(baud.value, port, log)
+
+    @property
+    def log(self) -> SecondLog | None:
+        return self.line.log
 
     def figures(self) -> dict[str, Any]:
         line = self.line

@@ -6,7 +6,14 @@ from __future__ import annotations
 from collections import Counter
 from typing import Any, Final
 
-from decoders.can_errors import BUS_OFF, ERROR_ACTIVE, ERROR_KEYS, ERROR_PASSIVE, error_report
+from decoders.can_errors import (
+    BUS_OFF,
+    ERROR_ACTIVE,
+    ERROR_KEYS,
+    ERROR_PASSIVE,
+    ErrorReport,
+    error_report,
+)
 
 #: the states whose periods are listed (error-warning is counted, not a period)
 PERIOD_STATES: Final = (ERROR_PASSIVE, BUS_OFF)
@@ -27,7 +34,8 @@ class ErrorFrameLog:
         self.since: float | None = None  # when the state began (None: untimed, or from start)
         self.last_t: float | None = None  # the latest error frame's time
 
-    def add(self, t: float | None, error_class: int, data: bytes) -> None:
+    def add(self, t: float | None, error_class: int, data: bytes) -> ErrorReport:
+        """One error frame, in time order; returns what it says."""
         report = error_report(error_class, data)
         self.total += 1
         if t is not None and (self.last_t is None or t > self.last_t):
@@ -39,10 +47,11 @@ class ErrorFrameLog:
             self.rx_max = max(self.rx_max or 0, report.rx_errors)
         state = report.state
         if state is None or state == self.state:
-            return
+            return report
         if self.state in PERIOD_STATES and self.since is not None and t is not None:
             self.periods.append((self.since, t, self.state))
         self.state, self.since = state, t
+        return report
 
     def figures(self, end: float | None) -> dict[str, Any]:
         """``error_frames`` (every class, 0 where none), ``error_counters`` (None where no frame

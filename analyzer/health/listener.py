@@ -18,14 +18,16 @@ from ..session.listener import Listener
 from .bus import BusHealth, CanBusHealth, SerialBusHealth
 from .can_load import can_seconds
 from .rates import BusRates
+from .seconds import HealthSecond
 
 
 class HealthListener(Listener):
     wants_raw = True
     reads_frame_batches = True
 
-    def __init__(self, rates: BusRates | None = None) -> None:
+    def __init__(self, rates: BusRates | None = None, seconds: bool = False) -> None:
         self.rates = rates or BusRates()
+        self.seconds = seconds  # keep the second-by-second rows (``take_seconds``)
         self.label = "bus health"
         self.can: dict[str, CanBusHealth] = {}
         self.serial: dict[str, SerialBusHealth] = {}
@@ -33,9 +35,9 @@ class HealthListener(Listener):
     def on_raw(self, items: Any) -> None:
         seconds, errors, others = can_seconds(items)
         for second in seconds:
-            self._can(second[0]).load.add(second)
+            self._can(second[0]).add(second)
         for bus, t, error_class, data in errors:
-            self._can(bus).errors.add(t, error_class, data)
+            self._can(bus).add_error(t, error_class, data)
         if others:  # byte chunks among the items (never in a native FrameBatch)
             for item in items:
                 chunk = item.payload
@@ -54,17 +56,32 @@ class HealthListener(Listener):
     def buses(self) -> list[dict[str, Any]]:
         """Every bus's figures, by bus name."""
         every: list[BusHealth] = [*self.can.values(), *self.serial.values()]
-        return [b.figures() for b in sorted(every, key=lambda b: (b.bus, b.kind))]
+        return [b.figures() for b in sorted(every, key=_order)]
+
+    def take_seconds(self, final: bool = False) -> list[HealthSecond]:
+        """The seconds every bus has completed since the last call (with ``final``, the open
+        ones too: at the end), by bus and second; empty unless made with ``seconds=True``."""
+        rows: list[HealthSecond] = []
+        every: list[BusHealth] = [*self.can.values(), *self.serial.values()]
+        for health in sorted(every, key=_order):
+            if health.log is not None:
+                rows += health.log.take(final)
+        return rows
 
     def _can(self, bus: str) -> CanBusHealth:
         health = self.can.get(bus)
         if health is None:
-            health = self.can[bus] = CanBusHealth(bus, self.rates.can(bus))
+            health = self.can[bus] = CanBusHealth(bus, self.rates.can(bus), self.seconds)
         return health
 
     def _serial(self, bus: str) -> SerialBusHealth:
         health = self.serial.get(bus)
         if health is None:
             rate = self.rates.serial(bus)
-            health = self.serial[bus] = SerialBusHealth(bus, rate, self.rates.ports.get(bus))
+            port = self.rates.ports.get(bus)
+            health = self.serial[bus] = SerialBusHealth(bus, rate, port, self.seconds)
         return health
+
+
+def _order(health: BusHealth) -> tuple[str, str]:
+    return health.bus, health.kind

@@ -21,6 +21,7 @@ from decoders.model import FRAME, MODBUS_RTU, REQUEST, RESPONSE, Chunk, Record
 from .figures import Spread, load_pct, per_second
 from .latency_timer import ReadTimes
 from .line_clock import FrameTimes, LineClock
+from .seconds import CLOSE_FRAMES, SecondLog
 
 ERROR_FLAGS: Final = (BAD_CHECKSUM, GARBAGE, TRUNCATED)
 MAX_WAITING: Final = 4096  # requests waiting for their response (pairing links at most a few)
@@ -29,8 +30,9 @@ MAX_WAITING: Final = 4096  # requests waiting for their response (pairing links 
 class SerialLine:
     """One serial bus, fed its reads (``add_read``) and then the records found in them."""
 
-    def __init__(self, baud: int, port: str | None = None) -> None:
+    def __init__(self, baud: int, port: str | None = None, log: SecondLog | None = None) -> None:
         self.baud = baud
+        self.log = log  # second by second, when asked for
         self.port = port
         self.byte_time_s = LINE_BITS_PER_BYTE / baud
         self.silence_ms = frame_silence_s(baud) * 1000.0  # Modbus RTU's t3.5
@@ -61,7 +63,10 @@ class SerialLine:
         self.bytes += n
         if t is None or not n:
             return
-        self.seconds[math.floor(t)] += n * LINE_BITS_PER_BYTE
+        second = math.floor(t)
+        self.seconds[second] += n * LINE_BITS_PER_BYTE
+        if self.log is not None:
+            self.log.frames(second, 0, n * LINE_BITS_PER_BYTE)
         begun = t - n * self.byte_time_s
         if self.first_t is None or begun < self.first_t:
             self.first_t = begun
@@ -72,15 +77,18 @@ class SerialLine:
     # -- records -----------------------------------------------------------------------------
 
     def add_record(self, rec: Record) -> None:
-        if rec.errors:
+        flags = [f for f in rec.flags if f in ERROR_FLAGS] if rec.errors else None
+        if flags is not None:
             self.errors += 1
-            self.error_counts.update(f for f in rec.flags if f in ERROR_FLAGS)
+            self.error_counts.update(flags)
         times = self._times(rec)
         if rec.kind == FRAME:
             self.frames += 1
             self.protocol = self.protocol or rec.protocol
             if times is not None:
                 self._frame(rec, times)
+        if self.log is not None and rec.t is not None and math.isfinite(rec.t):
+            self._log(math.floor(rec.t), rec.kind == FRAME, flags)
         self._last = None if times is None else (times, rec.kind == FRAME)
 
     def _times(self, rec: Record) -> FrameTimes | None:
@@ -103,6 +111,8 @@ class SerialLine:
             self.gaps.add(gap)
             if gap is not None and rec.protocol == MODBUS_RTU and gap < self.silence_ms:
                 self.close_frames += 1
+                if self.log is not None and rec.t is not None and math.isfinite(rec.t):
+                    self.log.event(math.floor(rec.t), CLOSE_FRAMES)
         if rec.direction == REQUEST:
             if len(self._waiting) >= MAX_WAITING:
                 del self._waiting[next(iter(self._waiting))]
@@ -114,6 +124,15 @@ class SerialLine:
                 if spread is None:
                     spread = self.turnaround[rec.device] = Spread()
                 spread.add(_between(request, times))
+
+    def _log(self, second: int, frame: bool, flags: list[str] | None) -> None:
+        """A record in the second-by-second log: a frame, an error (its flags)."""
+        log = self.log
+        assert log is not None
+        if frame:
+            log.frames(second, 1, 0)
+        if flags is not None:
+            log.error(second, tuple(flags))
 
     # -- the figures -------------------------------------------------------------------------
 

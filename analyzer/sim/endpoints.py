@@ -47,6 +47,7 @@ from decoders import build, eg2_can, eg2_serial
 from decoders.eg2_can import OP_POSITIONING_MOVE, OP_READ, OP_SERVO_FOLLOW, OP_WRITE, Eg2CanDecoder
 from decoders.eg2_serial import STATUS_FAILED, STATUS_OK, Cmd, Eg2SerialDecoder
 from decoders.flags import BAD_CHECKSUM, SWAPPED_CRC
+from decoders.modbus_framing import FIXED_SILENCE_S
 from decoders.modbus_pdu import BROADCAST as MODBUS_BROADCAST
 from decoders.modbus_rtu import ModbusRtuDecoder
 from decoders.model import EG2_CAN, FRAME, REQUEST, CanFrame, Chunk, Record
@@ -60,6 +61,9 @@ SERIAL_BROADCAST: Final = eg2_serial.BROADCAST
 CAN_BROADCAST: Final = eg2_can.BROADCAST
 BAUDRATE: Final = 115200
 POLL_S: Final = 0.05  # the longest the server thread sleeps: stop() is quick
+#: a Modbus slave answers after the standard's silence (t3.5: 1.75 ms at the demo's 115200
+#: baud) and a little more, as a real one does: sooner, and ``stats`` rightly flags the frames
+MODBUS_LATENCY_S: Final = (FIXED_SILENCE_S + 0.0005, FIXED_SILENCE_S + 0.0015)
 SILENCE_S: Final = 0.002  # a pause this long after bytes ends a frame (as RTU's 3.5 chars)
 
 Models = Mapping[int, GripperModel] | Iterable[GripperModel]
@@ -459,6 +463,7 @@ class ModbusGripperServer(_ByteServer):
     def __init__(
         self, port: str, models: Models, *, accept_swapped_crc: bool = False, **kwargs: Any
     ) -> None:
+        kwargs.setdefault("latency", MODBUS_LATENCY_S)
         super().__init__(port, models, **kwargs)
         self.accept_swapped_crc = accept_swapped_crc
 

@@ -81,12 +81,16 @@ class Link:
         self.min_gap_s = min_gap_s
         self.retries = retries
         self._last_send = -1e9
+        self._last_heard = -1e9  # when the last wait for an answer ended
 
     def close(self) -> None:
         pass
 
     def _pace(self) -> None:
-        wait = self._last_send + self.min_gap_s - time.monotonic()
+        # frames this far apart, and never sooner after an answer than the line's silence
+        # (Modbus RTU's t3.5: a host that speaks sooner is one ``stats`` rightly flags)
+        due = max(self._last_send + self.min_gap_s, self._last_heard + SILENCE_S)
+        wait = due - time.monotonic()
         if wait > 0 and self.stop.wait(wait):
             raise Stopped
         if self.stop.is_set():
@@ -116,6 +120,7 @@ class Link:
             if broadcast:
                 return None
             answer = self._wait(match, self.timeout_s if timeout_s is None else timeout_s)
+            self._last_heard = time.monotonic()
             if answer is None:
                 self.result.timeouts += 1
                 continue

@@ -2,10 +2,11 @@
 made, whether it holds CAN frames only), and the folder that makes each once per test session.
 
 The sample captures are copied; the candump log is written again by python-can's own ``.asc``
-and ``.blf`` writers; the two recordings are made by real ``eg2scope record --demo`` processes
-(all three simulated buses, and the CAN bus alone). Beside them a third process records the
+and ``.blf`` writers; the three recordings are made by real ``eg2scope record --demo`` processes
+(all three simulated buses, the CAN bus alone, and the scenario tour: every grip outcome, a
+dropped answer, a stall fault, a bus-off). Beside them a fourth process records the
 demo live with ``--rerun`` too: the live plot, whose MCAP ``/state`` says what it must hold.
-The three run at once, the first time any of them is needed.
+The four run at once, the first time any of them is needed.
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ CAPTURES = ROOT / "captures"
 EG2SCOPE = [sys.executable, "-m", "analyzer"]
 # plot's default target depends on a display; every command here runs as on a headless server
 HEADLESS = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-RECORD_S = {"mixed.mcap": 4.0, "can.mcap": 3.0, "live.mcap": 3.0}  # each one's --duration
+# each one's --duration
+RECORD_S = {"mixed.mcap": 4.0, "can.mcap": 3.0, "live.mcap": 3.0, "tour.mcap": 6.0}
+SCENARIO_TIME_SCALE = "4"  # the scenario's jaw 4x faster: its every cycle within the recording
 
 
 def copy_capture(name: str) -> Callable[[Path], None]:
@@ -49,6 +52,18 @@ def record_demo(*buses: str) -> Callable[[Path], list[str]]:
         duration = str(RECORD_S[path.name])
         return [*EG2SCOPE, "record", "--demo", "--buses", ",".join(buses), "-o", str(path),
                 "--duration", duration]  # fmt: skip
+
+    return argv
+
+
+def record_scenario(name: str) -> Callable[[Path], list[str]]:
+    """``record --demo --scenario NAME`` on the three buses: every grip outcome, a dropped
+    answer, a stall fault and a bus-off on CAN, with the simulator's truth beside it."""
+
+    def argv(path: Path) -> list[str]:
+        truth = str(path.with_suffix(".truth.jsonl"))
+        return [*record_demo(*ALL_BUSES)(path), "--scenario", name,
+                "--time-scale", SCENARIO_TIME_SCALE, "--truth", truth]  # fmt: skip
 
     return argv
 
@@ -84,6 +99,7 @@ KINDS = (
     InputKind("blf", "can_pick_place.blf", True, make=rewrite_candump),
     InputKind("mixed-recording", "mixed.mcap", False, record=record_demo(*ALL_BUSES)),
     InputKind("can-recording", "can.mcap", True, record=record_demo("can")),
+    InputKind("scenario-recording", "tour.mcap", False, record=record_scenario("tour")),
 )  # fmt: skip
 LIVE_DEMO = "live-demo"  # the simulated grippers, live: not a file
 LIVE_PLOT = InputKind(LIVE_DEMO, "live.mcap", False, record=record_live_plot(*ALL_BUSES))
