@@ -15,7 +15,7 @@ import re
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -30,6 +30,7 @@ from textual.widgets import Footer, Input, Static, TabbedContent, TabPane
 from textual.worker import Worker, WorkerState
 
 from ..cycles.model import Cycle
+from ..health.rates import BusRates
 from ..model import ERROR, LEVEL_NAMES, SourceEvent
 from ..session.listener import Listener
 from ..session.session import Session
@@ -39,6 +40,7 @@ from .cycle_feed import cycle_frames, cycles_listener, find_frame
 from .export import export, export_format
 from .feed import TRIGGERS, TuiFeed
 from .filter import FilterError, parse
+from .health_feed import HealthFeed
 from .layout import HEIGHT_BREAKPOINTS, WIDTH_BREAKPOINTS
 from .messages import (
     ByteSelected,
@@ -47,6 +49,7 @@ from .messages import (
     FeedUpdate,
     FieldSelected,
     FilterCancelled,
+    HealthUpdate,
     JumpTo,
     RowSelected,
 )
@@ -61,6 +64,7 @@ from .widgets.devices import DevicePanel
 from .widgets.event_log import EventLog
 from .widgets.filter_box import FilterBox
 from .widgets.frame_list import FrameList
+from .widgets.health import HealthLines
 from .widgets.latency import LatencyPanel
 from .widgets.problems import ProblemsPanel
 from .widgets.registers import RegisterWatch
@@ -76,7 +80,7 @@ class SessionPlan:
     (the feed, the grip cycles) among its own. ``live``: taps (ages by the wall clock) or a
     capture; ``replay``: the capture source, for pause and speed; ``recorder``: where marks
     go; ``freeze_on``: the armed trigger; ``title``: what is watched; ``notes``: what outputs
-    say while the app runs."""
+    say while the app runs; ``rates``: each bus's bit rate or baud (the bus load's measure)."""
 
     build: Callable[[list[Listener]], Session]
     live: bool = True
@@ -86,6 +90,7 @@ class SessionPlan:
     freeze_on: str | None = None
     title: str = "eg2scope"
     notes: Notes | None = None
+    rates: BusRates = field(default_factory=BusRates)
 
 
 class Eg2ScopeApp(App[int]):
@@ -107,8 +112,9 @@ class Eg2ScopeApp(App[int]):
         self.feed = TuiFeed(self.store, live=plan.live)
         self.feed.recorder = plan.recorder
         self.cycles, self.cycle_feed = cycles_listener()
+        self.health = HealthFeed(plan.rates)
         # the feed last: its final update (the session is over) comes after the others'
-        session = self.session = plan.build([self.cycles, self.feed])
+        session = self.session = plan.build([self.health, self.cycles, self.feed])
         self.feed.states = lambda: session.tracker.states
         self.feed.counts = lambda: (session.counts.items, session.source.dropped)
         self.failure: BaseException | None = None  # what the session's thread raised
@@ -134,6 +140,7 @@ class Eg2ScopeApp(App[int]):
         with Horizontal(id="main"):
             with Vertical(id="left"):
                 yield FrameList(self.store, id="frames")
+                yield HealthLines(self.clock, self.plan.live, id="health")
                 yield FilterBox(placeholder="filter: dev == 1 and bus == can0", id="filter")
                 yield Static("", id="filter-error")
                 yield Static("", id="status")
@@ -177,6 +184,7 @@ class Eg2ScopeApp(App[int]):
         self.frames.focus()
         self.feed.target = self
         self.cycle_feed.target = self
+        self.health.target = self
         if self.trigger:
             self.feed.arm(self.trigger)
         self.set_interval(0.25, self.show_status)
@@ -260,6 +268,11 @@ class Eg2ScopeApp(App[int]):
         if not self.closing:
             self.main_screen.query_one(CyclesPanel).take(update.cycles)
 
+    def on_health_update(self, update: HealthUpdate) -> None:
+        if not self.closing:
+            lines = self.main_screen.query_one(HealthLines)
+            lines.take(update.seconds, update.untimed, update.whole)
+
     def _ended(self) -> None:
         """The session is over: the damage its source found is said at once (a notification,
         the Events tab, the status line; ``eg2scope tui`` prints it again on exit), and the
@@ -281,7 +294,11 @@ class Eg2ScopeApp(App[int]):
         """Redraw the visible panel (``PANELS_S``; hidden ones are drawn when shown)."""
         if self.closing:
             return
-        active = self.main_screen.query_one(TabbedContent).active
+        try:
+            self.main_screen.query_one(HealthLines).redraw()  # ages
+            active = self.main_screen.query_one(TabbedContent).active
+        except NoMatches:  # the timer fired while the app tears its panes down
+            return
         snap = self.snapshot
         if active == "devices":
             panel = self.main_screen.query_one(DevicePanel)

@@ -10,10 +10,12 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_ERROR, UsageError
+from ..health.rates import rates_of_capture
 from ..live_runner import (
     LiveOptions,
     byte_times,
     check_recording_output,
+    metadata,
     open_source,
     recorder,
     session_protocol,
@@ -139,6 +141,7 @@ def live_plan(
         build,
         live=True,
         recorder=record,
+        rates=rates_of_capture(metadata(taps)),
         recording_path=live.output,
         freeze_on=opts.freeze_on,
         title=f"live: {names}",
@@ -171,6 +174,7 @@ def capture_plan(
         build,
         live=False,
         replay=source,
+        rates=rates_of_capture(reader.metadata),
         freeze_on=opts.freeze_on,
         title=f"capture: {capture.path}",
     )

@@ -66,14 +66,20 @@ class CyclesUpdate(Message):
 
 class HealthUpdate(Message):
     """Bus-health seconds completed since the last update (one row per bus and second);
-    ``untimed``: buses whose frames have no times (no load or rate can be said); ``done``: the
-    session is over (the open seconds came too)."""
+    ``untimed``: buses whose frames have no times (no load or rate can be said); ``whole``: at
+    the end of the session (the open seconds came too), every bus's figures over all of it,
+    as ``stats --format json`` gives them under ``buses`` (None: not over)."""
 
-    def __init__(self, seconds: list[HealthSecond], untimed: set[str], done: bool = False) -> None:
+    def __init__(
+        self,
+        seconds: list[HealthSecond],
+        untimed: set[str],
+        whole: list[dict[str, Any]] | None = None,
+    ) -> None:
         super().__init__()
         self.seconds = seconds
         self.untimed = untimed
-        self.done = done
+        self.whole = whole
 
 
 class CycleChosen(Message):
