@@ -479,8 +479,7 @@ class Eg2ScopeApp(App[int]):
             return
         self.go_to_index(start)
         self.notify(
-            f"ID {cycle.device} on {cycle.bus}: {cycle.outcome}, {cycle.command}; "
-            f"{len(self.evidence)} frames decided it, marked {MARKER_EVIDENCE} (] [ step)"
+            f"{len(self.evidence)} frames decided it: {MARKER_EVIDENCE} (] [ step)", timeout=4
         )
 
     def action_cycles(self) -> None:
