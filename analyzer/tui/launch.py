@@ -15,7 +15,6 @@ from ..live_runner import (
     LiveOptions,
     byte_times,
     check_recording_output,
-    metadata,
     open_source,
     recorder,
     session_protocol,
@@ -27,6 +26,7 @@ from ..session.session import Session, SessionOptions, signals_call
 from ..sim.rig import DemoOptions, DemoRig
 from ..sources.live import Tap
 from ..sources.tap_options import TapOptions, make_taps
+from .bus_rates import live_rates
 from .notes import Notes
 from .replay import ReplaySource
 
@@ -141,7 +141,7 @@ def live_plan(
         build,
         live=True,
         recorder=record,
-        rates=rates_of_capture(metadata(taps)),
+        rates=live_rates(taps),
         recording_path=live.output,
         freeze_on=opts.freeze_on,
         title=f"live: {names}",

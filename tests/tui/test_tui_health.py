@@ -11,11 +11,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from conftest import CAPTURES, SIZES, capture_app, demo_app, eg2scope, until
+from conftest import CAPTURES, SIZES, capture_app, demo_app, eg2scope, tui_opts, until
 
 from analyzer.health.bus import NO_TIMING
 from analyzer.health.seconds import HealthSecond
 from analyzer.sim.rig import DemoRig
+from analyzer.sources.tap_options import make_taps
+from analyzer.tui.bus_rates import live_rates
 from analyzer.tui.messages import HealthUpdate
 from analyzer.tui.widgets.health import BusHealthLine, HealthLines, health_text
 
@@ -135,3 +137,14 @@ def test_every_live_bus_has_its_load_and_frames_per_second() -> None:
                     app.session.stop()
 
     asyncio.run(scenario())
+
+
+def test_a_live_bus_is_measured_at_the_rate_its_tap_was_opened_at() -> None:
+    """``--baud`` of a serial tap named later by its protocol (rs232 or rs485) and ``-b`` of
+    a CAN tap: the loads are of those rates, not the EG2's defaults."""
+    serial = make_taps(tui_opts("--serial", "/dev/ttyUSB7", "--baud", "9600").taps)
+    assert [t.named_by_protocol for t in serial] == [True]
+    rates = live_rates(serial)
+    assert rates.serial("rs232").value == rates.serial("rs485").value == 9600
+    can = make_taps(tui_opts("-i", "virtual", "-c", "tui-rates", "-b", "250000").taps)
+    assert live_rates(can).can(can[0].bus).value == 250_000
