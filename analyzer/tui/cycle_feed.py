@@ -41,13 +41,14 @@ class CycleFeed(CycleOutput):
             self._post()
 
     def close(self) -> None:
-        self._post(done=True)
+        if self._held:
+            self._post()
 
-    def _post(self, done: bool = False) -> None:
+    def _post(self) -> None:
         self._next_post = time.monotonic() + POST_INTERVAL_S
         cycles, self._held = self._held, []
         if self.target is not None:
-            self.target.post_message(CyclesUpdate(cycles, done))
+            self.target.post_message(CyclesUpdate(cycles))
 
 
 def cycles_listener() -> tuple[CyclesListener, CycleFeed]:

@@ -56,12 +56,11 @@ class FeedUpdate(Message):
 
 class CyclesUpdate(Message):
     """Grip cycles that ended since the last update (posted in batches from the session's
-    thread); ``done``: the session is over, every cycle has come."""
+    thread; the last ones before the feed's final update)."""
 
-    def __init__(self, cycles: list[Cycle], done: bool = False) -> None:
+    def __init__(self, cycles: list[Cycle]) -> None:
         super().__init__()
         self.cycles = cycles
-        self.done = done
 
 
 class HealthUpdate(Message):
