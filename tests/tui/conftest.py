@@ -13,7 +13,6 @@ from typing import Any
 
 import can
 import pytest
-from scenario_capture import record_argv
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
@@ -114,6 +113,8 @@ def tour(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     by real ``eg2scope record --demo --scenario tour`` processes, at once: on the three buses
     ("mixed") and on CAN alone ("can", which the native engine decodes); each folder holds
     ``tour.mcap`` and the simulator's truth, ``tour.truth.jsonl``."""
+    from scenario_capture import record_argv  # tests/: not on the benchmarks' path
+
     folders = {"mixed": None, "can": "can"}
     made = {kind: tmp_path_factory.mktemp(f"tour-{kind}") for kind in folders}
     procs = [
