@@ -3,7 +3,8 @@
 wrote. The panel lists the cycles ``eg2scope cycles`` finds (a real process) on each engine,
 with the outcomes the simulator played; Enter on a cycle selects its command in the frame list
 and marks the frames that decided it (] and [ step through them), at 80x24 and 200x50, also
-when a display filter hides them; live, the demo's cycles appear as they end."""
+when a display filter hides them; live, the demo's cycles appear as they end; the command
+palette finds the panel."""
 
 from __future__ import annotations
 
@@ -13,9 +14,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import SIZES, capture_app, demo_app, driving, eg2scope, until
+from conftest import CAPTURES, SIZES, capture_app, demo_app, driving, eg2scope, until
 from native_core import needs_native
 from scenario_capture import read_truth
+from textual.command import CommandList, CommandPalette
+from textual.widgets import TabbedContent
 
 from analyzer.cycles.model import CLOSED_EMPTY, GRIPPED, OPENED, UNFINISHED
 from analyzer.sim.rig import DemoRig
@@ -157,5 +160,28 @@ def test_the_demos_cycles_appear_live_as_they_end() -> None:
                 line = render_cycle(gripped, app.store.t0, cycle_layout(80)).plain
                 assert GRIPPED in line and f"{gripped.width_mm:.1f}" in line, line
                 await pilot.press("q")
+
+    asyncio.run(scenario())
+
+
+def test_the_command_palette_opens_the_cycles_panel() -> None:
+    async def scenario() -> None:
+        app = capture_app(CAPTURES / "can_pick_place.log")
+        async with driving(app, SIZES["80x24"]) as pilot:
+            await until(pilot, lambda: app.done)
+            await pilot.press("ctrl+p")
+            await until(pilot, lambda: isinstance(app.screen, CommandPalette))
+            await pilot.pause(0.3)
+            await pilot.press(*"grip cycles")
+            await pilot.pause(0.5)
+            hits = app.screen.query_one(CommandList)
+            text = [str(hits.get_option_at_index(i).prompt) for i in range(hits.option_count)]
+            assert any("Grip cycles" in t and "[c]" in t for t in text), text
+            chosen = next(i for i, t in enumerate(text) if "[c]" in t)
+            hits.highlighted = chosen
+            await pilot.press("enter")
+            await until(pilot, lambda: app.query_one(CyclesPanel).has_focus)
+            assert app.query_one(TabbedContent).active == "cycles"
+            await pilot.press("q")
 
     asyncio.run(scenario())
