@@ -60,8 +60,10 @@ async def panel_cycles(path: Path, *argv: str) -> tuple[list[Cycle], list[str]]:
     async with driving(app, SIZES["200x50"]) as pilot:
         await until(pilot, lambda: app.done, timeout=60)
         await pilot.press("c")
-        await pilot.pause(0.3)
         panel = app.query_one(CyclesPanel)
+        outcomes = [c.outcome for c in panel.cycles]
+        panel.move_to(outcomes.index(GRIPPED) if GRIPPED in outcomes else 0)  # into view
+        await pilot.pause(0.3)
         lines = [line.text for line in (panel.render_line(y) for y in range(panel.size.height))]
         return [c.to_dict() for c in panel.cycles], lines
 

@@ -136,7 +136,7 @@ class CyclesPanel(ScrollView, can_focus=True):
         if not cycles:
             return
         self.cycles.extend(cycles)
-        self.virtual_size = Size(self.size.width, len(self.cycles) + 1)  # + the header
+        self._resize()
         if self.follow:
             self.move_to(len(self.cycles) - 1, follow=True)
         self.refresh()
@@ -191,8 +191,19 @@ class CyclesPanel(ScrollView, can_focus=True):
         if offset is not None and offset.y > 0:
             self.move_to(self.scroll_offset.y + offset.y - 1)
 
+    def _resize(self) -> None:
+        size = Size(self.scrollable_content_region.width, len(self.cycles) + 1)  # + the header
+        height = self.scrollable_content_region.height
+        if height and min(size.height, self.virtual_size.height) > height:
+            # longer, with the scroll bar shown already: only the bar changes, no layout of
+            # the screen (cycles end many times a second on a busy bus; FrameList does so too)
+            self.set_reactive(CyclesPanel.virtual_size, size)
+            self._scroll_update(size)
+        else:
+            self.virtual_size = size
+
     def on_resize(self, event: events.Resize) -> None:
-        self.virtual_size = Size(self.size.width, len(self.cycles) + 1)
+        self._resize()
         if self.follow and self.cycles:
             self.move_to(len(self.cycles) - 1, follow=True)
 
