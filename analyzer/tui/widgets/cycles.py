@@ -136,10 +136,17 @@ class CyclesPanel(ScrollView, can_focus=True):
         if not cycles:
             return
         self.cycles.extend(cycles)
+        if self.region:  # shown: hidden (another tab), it catches up when shown (on_show)
+            self._catch_up()
+
+    def _catch_up(self) -> None:
         self._resize()
         if self.follow:
             self.move_to(len(self.cycles) - 1, follow=True)
         self.refresh()
+
+    def on_show(self) -> None:
+        self._catch_up()
 
     def ended(self, what: str) -> None:
         """The session is over (``what``: the capture, the session)."""
@@ -203,9 +210,7 @@ class CyclesPanel(ScrollView, can_focus=True):
             self.virtual_size = size
 
     def on_resize(self, event: events.Resize) -> None:
-        self._resize()
-        if self.follow and self.cycles:
-            self.move_to(len(self.cycles) - 1, follow=True)
+        self._catch_up()
 
     # -- rendering ----------------------------------------------------------------------------
 
