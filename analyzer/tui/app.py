@@ -1,12 +1,13 @@
 """The TUI application: the panes, the keys, and one session on a worker thread.
 
-The session (live taps or a capture) is made with the app and runs in a Textual thread
-worker; the ``TuiFeed`` listener fills the store on that thread and posts a ``FeedUpdate``
-10-20 times a second. Pausing the view never pauses capture or recording; quitting stops the
-session and waits for it to close every listener, so a recording is complete when the app has
-gone. The app ending any other way (a crash) stops the session too. A session thread that
-raises is shown at once (a notification, the status line, the events tab) and kept in
-``failure``: ``eg2scope tui`` prints it and exits 1.
+The session (live taps or a capture) is made with the app and runs in a Textual thread worker;
+the ``TuiFeed`` listener fills the store on that thread and posts a ``FeedUpdate`` 10-20 times
+a second; beside it the grip cycles (``CyclesListener`` writing to a ``CycleFeed``) and the bus
+health (``HealthFeed``) post theirs in batches too. Pausing the view never pauses capture or
+recording; quitting stops the session and waits for it to close every listener, so a recording
+is complete when the app has gone. The app ending any other way (a crash) stops the session
+too. A session thread that raises is shown at once (a notification, the status line, the events
+tab) and kept in ``failure``: ``eg2scope tui`` prints it and exits 1.
 """
 
 from __future__ import annotations
@@ -77,10 +78,11 @@ PANELS_S = 0.5  # the visible panel is redrawn this often (ages, fading highligh
 @dataclass
 class SessionPlan:
     """How the app gets its session: ``build(listeners)`` makes it with the TUI's listeners
-    (the feed, the grip cycles) among its own. ``live``: taps (ages by the wall clock) or a
-    capture; ``replay``: the capture source, for pause and speed; ``recorder``: where marks
-    go; ``freeze_on``: the armed trigger; ``title``: what is watched; ``notes``: what outputs
-    say while the app runs; ``rates``: each bus's bit rate or baud (the bus load's measure)."""
+    (the feed, the grip cycles, the bus health) among its own. ``live``: taps (ages by the wall
+    clock) or a capture; ``replay``: the capture source, for pause and speed; ``recorder``:
+    where marks go; ``freeze_on``: the armed trigger; ``title``: what is watched; ``notes``:
+    what outputs say while the app runs; ``rates``: each bus's bit rate or baud (the bus load's
+    measure)."""
 
     build: Callable[[list[Listener]], Session]
     live: bool = True
