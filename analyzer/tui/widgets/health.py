@@ -9,7 +9,7 @@ rather than show a load or a rate; a live bus that has gone quiet says for how l
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Final
 
 from rich.style import Style
@@ -19,6 +19,7 @@ from textual.widgets import Static
 from decoders.can_errors import ERROR_ACTIVE
 
 from ...health.bus import NO_TIMING
+from ...health.figures import PERCENT_DIGITS
 
 if TYPE_CHECKING:
     from ...health.seconds import HealthSecond
@@ -37,7 +38,7 @@ NARROW: Final = 100
 @dataclass
 class BusHealthLine:
     """What one bus's line shows. ``peak``: the highest load of a second the bus covered whole
-    (its first second, and those still open at the end, are partly outside its frames);
+    (its first second, and its last one at the end, are partly outside its frames);
     ``event``: the latest second with an event, and the event in words; ``whole``: the bus's
     figures over the whole session, once it is over (``stats --format json``'s)."""
 
@@ -50,13 +51,32 @@ class BusHealthLine:
     whole: dict[str, Any] | None = None
 
     def add(self, row: HealthSecond, whole: bool) -> None:
+        if self.last is not None and row.second == self.last.second:
+            row = rest_of(self.last, row)
         if self.first is None:
             self.first = row.second
-        elif whole and row.load_pct is not None and (self.peak is None or row.load_pct > self.peak):
-            self.peak = row.load_pct
+        load = row.load_pct
+        if whole and row.second != self.first and load is not None:
+            self.peak = load if self.peak is None else max(self.peak, load)
         self.last = row
         if row.worst is not None:
             self.event = (row.second, row.worst)
+
+
+def rest_of(shown: HealthSecond, late: HealthSecond) -> HealthSecond:
+    """A second shown already and the rest of it, come later (a serial frame that ended in it
+    was found after a later read had closed it): one second."""
+    load = None
+    if shown.load_pct is not None and late.load_pct is not None:
+        load = round(shown.load_pct + late.load_pct, PERCENT_DIGITS)
+    return replace(
+        late,
+        frames=shown.frames + late.frames,
+        bits=shown.bits + late.bits,
+        load_pct=load,
+        errors=shown.errors + late.errors,
+        worst=late.worst or shown.worst,
+    )
 
 
 def ago(seconds: float) -> str:
@@ -171,8 +191,11 @@ class HealthLines(Static):
         lines = self.lines
         for bus in untimed:
             lines.setdefault(bus, BusHealthLine(bus)).untimed = True
+        # at the end, each bus's last second is cut by the end of its frames
+        last = {} if whole is None else {row.bus: row.second for row in seconds}
         for row in seconds:
-            lines.setdefault(row.bus, BusHealthLine(row.bus)).add(row, whole=whole is None)
+            line = lines.setdefault(row.bus, BusHealthLine(row.bus))
+            line.add(row, whole=last.get(row.bus) != row.second)
         for figures in whole or []:
             lines.setdefault(figures["bus"], BusHealthLine(figures["bus"])).whole = figures
         self.redraw()
