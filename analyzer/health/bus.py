@@ -43,15 +43,20 @@ class CanBusHealth:
         if self.log is not None and t is not None:
             self.log.controller(math.floor(t), report)
 
+    @property
+    def timing(self) -> str | None:
+        """``NO_TIMING`` when the bus's frames have no times (None: timed, or no frames)."""
+        timed = self.load.last_t is not None or self.errors.last_t is not None
+        return None if timed or not self.load.frames else NO_TIMING
+
     def figures(self) -> dict[str, Any]:
         load = self.load.figures(self.rate.value)
-        timed = self.load.last_t is not None or self.errors.last_t is not None
         return {
             "bus": self.bus,
             "kind": CAN,
             "bitrate": self.rate.value,
             "bitrate_from": self.rate.source,
-            "timing": None if timed or not self.load.frames else NO_TIMING,
+            "timing": self.timing,
             **load,
             **self.errors.figures(self.load.last_t),
         }
@@ -74,15 +79,20 @@ class SerialBusHealth:
     def log(self) -> SecondLog | None:
         return self.line.log
 
-    def figures(self) -> dict[str, Any]:
+    @property
+    def timing(self) -> str | None:
+        """``NO_TIMING`` when the line's reads have no times (None: timed, or no bytes)."""
         line = self.line
+        return None if line.last_t is not None or not line.bytes else NO_TIMING
+
+    def figures(self) -> dict[str, Any]:
         return {
             "bus": self.bus,
             "kind": SERIAL,
             "baud": self.rate.value,
             "baud_from": self.rate.source,
-            "timing": None if line.last_t is not None or not line.bytes else NO_TIMING,
-            **line.figures(),
+            "timing": self.timing,
+            **self.line.figures(),
         }
 
 

@@ -1,12 +1,13 @@
 """The TUI application: the panes, the keys, and one session on a worker thread.
 
-The session (live taps or a capture) is made with the app and runs in a Textual thread
-worker; the ``TuiFeed`` listener fills the store on that thread and posts a ``FeedUpdate``
-10-20 times a second. Pausing the view never pauses capture or recording; quitting stops the
-session and waits for it to close every listener, so a recording is complete when the app has
-gone. The app ending any other way (a crash) stops the session too. A session thread that
-raises is shown at once (a notification, the status line, the events tab) and kept in
-``failure``: ``eg2scope tui`` prints it and exits 1.
+The session (live taps or a capture) is made with the app and runs in a Textual thread worker;
+the ``TuiFeed`` listener fills the store on that thread and posts a ``FeedUpdate`` 10-20 times
+a second; beside it the grip cycles (``CyclesListener`` writing to a ``CycleFeed``) and the bus
+health (``HealthFeed``) post theirs in batches too. Pausing the view never pauses capture or
+recording; quitting stops the session and waits for it to close every listener, so a recording
+is complete when the app has gone. The app ending any other way (a crash) stops the session
+too. A session thread that raises is shown at once (a notification, the status line, the events
+tab) and kept in ``failure``: ``eg2scope tui`` prints it and exits 1.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import re
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -29,32 +30,42 @@ from textual.timer import Timer
 from textual.widgets import Footer, Input, Static, TabbedContent, TabPane
 from textual.worker import Worker, WorkerState
 
+from ..cycles.model import Cycle
+from ..health.rates import BusRates
 from ..model import ERROR, LEVEL_NAMES, SourceEvent
+from ..session.listener import Listener
 from ..session.session import Session
 from . import keys
 from .aggregates import Snapshot
+from .cycle_feed import cycle_frames, cycles_listener, find_frame
 from .export import export, export_format
 from .feed import TRIGGERS, TuiFeed
 from .filter import FilterError, parse
+from .health_feed import HealthFeed
 from .layout import HEIGHT_BREAKPOINTS, WIDTH_BREAKPOINTS
 from .messages import (
     ByteSelected,
+    CycleChosen,
+    CyclesUpdate,
     FeedUpdate,
     FieldSelected,
     FilterCancelled,
+    HealthUpdate,
     JumpTo,
     RowSelected,
 )
 from .notes import Notes
 from .replay import ReplaySource, next_speed, speed_text
-from .rows import TimeMode
+from .rows import MARKER_EVIDENCE, TimeMode
 from .screens import HelpScreen, PromptScreen
 from .store import RecordStore
+from .widgets.cycles import CyclesPanel
 from .widgets.detail import DetailTree, HexPane
 from .widgets.devices import DevicePanel
 from .widgets.event_log import EventLog
 from .widgets.filter_box import FilterBox
 from .widgets.frame_list import FrameList
+from .widgets.health import HealthLines
 from .widgets.latency import LatencyPanel
 from .widgets.problems import ProblemsPanel
 from .widgets.registers import RegisterWatch
@@ -66,12 +77,14 @@ PANELS_S = 0.5  # the visible panel is redrawn this often (ages, fading highligh
 
 @dataclass
 class SessionPlan:
-    """How the app gets its session: ``build(feed)`` makes it with the feed among its
-    listeners. ``live``: taps (ages by the wall clock) or a capture; ``replay``: the capture
-    source, for pause and speed; ``recorder``: where marks go; ``freeze_on``: the armed
-    trigger; ``title``: what is watched; ``notes``: what outputs say while the app runs."""
+    """How the app gets its session: ``build(listeners)`` makes it with the TUI's listeners
+    (the feed, the grip cycles, the bus health) among its own. ``live``: taps (ages by the wall
+    clock) or a capture; ``replay``: the capture source, for pause and speed; ``recorder``:
+    where marks go; ``freeze_on``: the armed trigger; ``title``: what is watched; ``notes``:
+    what outputs say while the app runs; ``rates``: each bus's bit rate or baud (the bus load's
+    measure)."""
 
-    build: Callable[[TuiFeed], Session]
+    build: Callable[[list[Listener]], Session]
     live: bool = True
     replay: ReplaySource | None = None
     recorder: Any = None
@@ -79,6 +92,7 @@ class SessionPlan:
     freeze_on: str | None = None
     title: str = "eg2scope"
     notes: Notes | None = None
+    rates: BusRates = field(default_factory=BusRates)
 
 
 class Eg2ScopeApp(App[int]):
@@ -99,7 +113,10 @@ class Eg2ScopeApp(App[int]):
         self.store = store if store is not None else RecordStore()
         self.feed = TuiFeed(self.store, live=plan.live)
         self.feed.recorder = plan.recorder
-        session = self.session = plan.build(self.feed)
+        self.cycles, self.cycle_feed = cycles_listener()
+        self.health = HealthFeed(plan.rates)
+        # the feed last: its final update (the session is over) comes after the others'
+        session = self.session = plan.build([self.health, self.cycles, self.feed])
         self.feed.states = lambda: session.tracker.states
         self.feed.counts = lambda: (session.counts.items, session.source.dropped)
         self.failure: BaseException | None = None  # what the session's thread raised
@@ -112,6 +129,7 @@ class Eg2ScopeApp(App[int]):
         self.frozen_on: int | None = None
         self.export_note = ""
         self.snapshot: Snapshot | None = None
+        self.evidence: list[int] = []  # store indices of the chosen cycle's frames
         self.panels_stale = False
         self._detail_due: int | None = None
         self._detail_timer: Timer | None = None
@@ -124,6 +142,7 @@ class Eg2ScopeApp(App[int]):
         with Horizontal(id="main"):
             with Vertical(id="left"):
                 yield FrameList(self.store, id="frames")
+                yield HealthLines(self.clock, self.plan.live, id="health")
                 yield FilterBox(placeholder="filter: dev == 1 and bus == can0", id="filter")
                 yield Static("", id="filter-error")
                 yield Static("", id="status")
@@ -141,6 +160,8 @@ class Eg2ScopeApp(App[int]):
                 yield LatencyPanel(id="latency-panel")
             with TabPane("Events", id="events"):
                 yield EventLog(id="event-log")
+            with TabPane("Cycles", id="cycles"):
+                yield CyclesPanel(self.store, id="cycle-panel")
         yield Static("", id="letter-prompt")
         yield Footer(compact=True)  # compact: 80 columns hold every key
 
@@ -164,6 +185,8 @@ class Eg2ScopeApp(App[int]):
             notes.show = lambda line: self.call_from_thread(self.notify, line, timeout=10)
         self.frames.focus()
         self.feed.target = self
+        self.cycle_feed.target = self
+        self.health.target = self
         if self.trigger:
             self.feed.arm(self.trigger)
         self.set_interval(0.25, self.show_status)
@@ -243,6 +266,15 @@ class Eg2ScopeApp(App[int]):
             self._ended()
             self.show_panels()
 
+    def on_cycles_update(self, update: CyclesUpdate) -> None:
+        if not self.closing:
+            self.main_screen.query_one(CyclesPanel).take(update.cycles)
+
+    def on_health_update(self, update: HealthUpdate) -> None:
+        if not self.closing:
+            lines = self.main_screen.query_one(HealthLines)
+            lines.take(update.seconds, update.untimed, update.whole)
+
     def _ended(self) -> None:
         """The session is over: the damage its source found is said at once (a notification,
         the Events tab, the status line; ``eg2scope tui`` prints it again on exit), and the
@@ -257,13 +289,18 @@ class Eg2ScopeApp(App[int]):
         log.ended(what)
         screen.query_one(DevicePanel).ended(what)
         screen.query_one(LatencyPanel).ended(what)
+        screen.query_one(CyclesPanel).ended(what)
         self.show_status()
 
     def show_panels(self) -> None:
         """Redraw the visible panel (``PANELS_S``; hidden ones are drawn when shown)."""
         if self.closing:
             return
-        active = self.main_screen.query_one(TabbedContent).active
+        try:
+            self.main_screen.query_one(HealthLines).redraw()  # ages
+            active = self.main_screen.query_one(TabbedContent).active
+        except NoMatches:  # the timer fired while the app tears its panes down
+            return
         snap = self.snapshot
         if active == "devices":
             panel = self.main_screen.query_one(DevicePanel)
@@ -422,6 +459,54 @@ class Eg2ScopeApp(App[int]):
             frames.set_filter(None)
             frames.jump_to_index(index)
         frames.focus()
+
+    # -- grip cycles -------------------------------------------------------------------------
+
+    @on(CycleChosen)
+    def cycle_chosen(self, event: CycleChosen) -> None:
+        if not self.closing:  # a message that comes in while the app is taken down
+            self.show_cycle(event.cycle)
+
+    def show_cycle(self, cycle: Cycle) -> None:
+        """Select the cycle's command in the frame list and mark every frame that decided it
+        (] and [ step through them); a filter that hides the command is cleared, and said."""
+        frames, store = self.frames, self.store
+        frames.take_new(store.count)  # the store may be a batch ahead of the list
+        self.evidence = cycle_frames(store, cycle)
+        frames.evidence = frozenset(self.evidence)
+        frames.restyle()
+        start = find_frame(store, cycle.bus, cycle.start_seq)
+        if start is None:
+            self.notify(f"the cycle's command (#{cycle.start_seq} on {cycle.bus}) is not held")
+            return
+        self.go_to_index(start)
+        self.notify(
+            f"{len(self.evidence)} frames decided it: {MARKER_EVIDENCE} (] [ step)", timeout=4
+        )
+
+    def action_cycles(self) -> None:
+        self.action_tab("cycles")
+        self.main_screen.query_one(CyclesPanel).focus()
+
+    def action_next_evidence(self) -> None:
+        self._step_evidence(1)
+
+    def action_previous_evidence(self) -> None:
+        self._step_evidence(-1)
+
+    def _step_evidence(self, step: int) -> None:
+        if not self.evidence:
+            self.notify("no grip cycle chosen: Enter on one in the cycles panel (c)")
+            return
+        here = self.frames.selected
+        if here is None:
+            later = self.evidence
+        else:
+            later = [i for i in self.evidence if (i - here) * step > 0]
+        if not later:
+            self.notify(f"no {'next' if step > 0 else 'previous'} frame of this cycle")
+            return
+        self.go_to_index(later[0] if step > 0 else later[-1])
 
     # -- actions -----------------------------------------------------------------------------
 

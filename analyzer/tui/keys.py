@@ -47,16 +47,22 @@ KEYS: Final[tuple[Key, ...]] = (
     Key("3", "tab('registers')", "register watch of the selected gripper"),
     Key("4", "tab('latency')", "latency per command"),
     Key("5", "tab('events')", "source events"),
+    Key("6", "tab('cycles')", "grip cycles panel: each cycle as it ends, outcome and figures"),
+    Key("c", "cycles", "grip cycles: to the panel's list (Enter shows a cycle's frames)", "cycles"),
+    Key("right_square_bracket", "next_evidence", "next frame of the chosen grip cycle", "", "]"),
+    Key("left_square_bracket", "previous_evidence", "previous frame of the chosen cycle", "", "["),
     Key("d", "toggle_detail", "detail pane: hide/show (narrow: swap with the list)"),
     Key("tab", "focus_next", "next pane (frames, detail, hex, panels)"),
     Key("ctrl+t", "toggle_dark", "light/dark theme"),
-    Key("ctrl+p", "command_palette", "command palette: every action"),
+    # its footer word is this description's first word: short, so 80 columns hold every key
+    Key("ctrl+p", "command_palette", "commands: the command palette, every action by name"),
 )
 
 LIST_KEYS: Final[tuple[tuple[str, str], ...]] = (
     ("up/down, k/j", "move the cursor (stops following)"),
     ("PgUp/PgDn, Home", "page, first frame"),
     ("Enter (problems)", "jump to the first frame of that problem"),
+    ("Enter (cycles)", "jump to the cycle's command; the frames that decided it are marked ◆"),
     ("left/right (hex)", "move the byte cursor: the field that holds it is selected"),
 )
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_ERROR, UsageError
+from ..health.rates import rates_of_capture
 from ..live_runner import (
     LiveOptions,
     byte_times,
@@ -25,6 +26,7 @@ from ..session.session import Session, SessionOptions, signals_call
 from ..sim.rig import DemoOptions, DemoRig
 from ..sources.live import Tap
 from ..sources.tap_options import TapOptions, make_taps
+from .bus_rates import live_rates
 from .notes import Notes
 from .replay import ReplaySource
 
@@ -131,14 +133,15 @@ def live_plan(
     )
     outputs = ([] if record is None else [record]) + list(extra or [])
 
-    def build(feed: Listener) -> Session:
-        return Session(source, [*outputs, feed], options)
+    def build(tui: list[Listener]) -> Session:
+        return Session(source, [*outputs, *tui], options)
 
     names = ", ".join(t.bus for t in taps)
     return SessionPlan(
         build,
         live=True,
         recorder=record,
+        rates=live_rates(taps),
         recording_path=live.output,
         freeze_on=opts.freeze_on,
         title=f"live: {names}",
@@ -164,13 +167,14 @@ def capture_plan(
     options = SessionOptions(protocol=byte_protocol(capture), engine=capture.engine)
     outputs = list(extra or [])
 
-    def build(feed: Listener) -> Session:
-        return Session(source, [*outputs, feed], options)
+    def build(tui: list[Listener]) -> Session:
+        return Session(source, [*outputs, *tui], options)
 
     return SessionPlan(
         build,
         live=False,
         replay=source,
+        rates=rates_of_capture(reader.metadata),
         freeze_on=opts.freeze_on,
         title=f"capture: {capture.path}",
     )

@@ -43,3 +43,28 @@ def row_layout(width: int) -> RowLayout:
     if width >= 110:  # the longest register ranges (CMD_OPENLEN_SET..CMD_FORCE_SET) fit
         return RowLayout(width, seq=7, time=12, bus=6, device=8, name=31)
     return RowLayout(width, seq=0, time=12, bus=6, device=8, name=18)
+
+
+@dataclass(frozen=True)
+class CycleLayout:
+    """Column widths of one row of the cycles panel. The command in words takes what is left
+    of ``width``; ``warnings`` 0: a cycle's warnings go before its command instead;
+    ``figures``: the measures' headers and widths (opening at contact, force peak, time to
+    contact, cycle time)."""
+
+    width: int
+    time: int
+    bus: int
+    device: int
+    warnings: int
+    figures: tuple[tuple[str, int], ...]
+
+
+def cycle_layout(width: int) -> CycleLayout:
+    """The cycles panel's columns for ``width`` cells: the outcome and the figures always,
+    a warnings column of its own where there is room."""
+    if width >= 110:
+        figures = (("width mm", 8), ("force", 5), ("contact ms", 10), ("cycle ms", 9))
+        return CycleLayout(width, time=11, bus=7, device=7, warnings=14, figures=figures)
+    figures = (("mm", 5), ("force", 5), ("touch ms", 8), ("cycle ms", 8))
+    return CycleLayout(width, time=8, bus=6, device=5, warnings=0, figures=figures)

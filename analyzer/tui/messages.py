@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual.message import Message
 
 from ..model import SourceEvent
 from .aggregates import DeviceKey, Snapshot
 from .spans import Span
+
+if TYPE_CHECKING:
+    from ..cycles.model import Cycle
+    from ..health.seconds import HealthSecond
 
 
 @dataclass
@@ -48,6 +52,41 @@ class FeedUpdate(Message):
         self.captured = captured  # chunks/frames captured so far
         self.dropped = dropped
         self.done = done  # the session has ended
+
+
+class CyclesUpdate(Message):
+    """Grip cycles that ended since the last update (posted in batches from the session's
+    thread; the last ones before the feed's final update)."""
+
+    def __init__(self, cycles: list[Cycle]) -> None:
+        super().__init__()
+        self.cycles = cycles
+
+
+class HealthUpdate(Message):
+    """Bus-health seconds completed since the last update (one row per bus and second);
+    ``untimed``: buses whose frames have no times (no load or rate can be said); ``whole``: at
+    the end of the session (the open seconds came too), every bus's figures over all of it,
+    as ``stats --format json`` gives them under ``buses`` (None: not over)."""
+
+    def __init__(
+        self,
+        seconds: list[HealthSecond],
+        untimed: set[str],
+        whole: list[dict[str, Any]] | None = None,
+    ) -> None:
+        super().__init__()
+        self.seconds = seconds
+        self.untimed = untimed
+        self.whole = whole
+
+
+class CycleChosen(Message):
+    """Enter on a cycle in the cycles panel: show its frames."""
+
+    def __init__(self, cycle: Cycle) -> None:
+        super().__init__()
+        self.cycle = cycle
 
 
 class RowSelected(Message):

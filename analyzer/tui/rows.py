@@ -39,6 +39,7 @@ STYLE_SEQ: Final = Style(dim=True)
 STYLE_LATENCY: Final = Style(color="green")
 STYLE_REF: Final = Style(color="black", bgcolor="cyan", bold=True)
 STYLE_MATCH: Final = Style(color="black", bgcolor="yellow")
+STYLE_EVIDENCE: Final = Style(color="yellow", bold=True)
 
 # the gutter's markers, most serious first (the help screen lists them from here)
 MARKER_ERROR: Final = "!"
@@ -46,6 +47,7 @@ MARKER_UNANSWERED: Final = "?"
 MARKER_ORPHAN: Final = "¿"
 MARKER_RETRANSMISSION: Final = "↻"
 MARKER_WARNING: Final = "⚠"
+MARKER_EVIDENCE: Final = "◆"
 MARKERS: Final = (
     (MARKER_ERROR, "an error: bad checksum or CRC, garbage, a truncated or malformed frame"),
     (MARKER_UNANSWERED, "a request that got no response"),
@@ -53,6 +55,7 @@ MARKERS: Final = (
     (MARKER_RETRANSMISSION, "the same request sent again before the first was answered"),
     (MARKER_WARNING, "a warning: a value out of range, a timing rule broken, ..."),
     ("a-z", "a mark set with m (jump to it with ')"),
+    (MARKER_EVIDENCE, "a frame that decided the grip cycle chosen in the cycles panel (] [ step)"),
 )
 
 
@@ -161,7 +164,8 @@ def render_row(
     style, marker = row_style(store, i)
     device = store.device_of(i)
     text = Text(no_wrap=True, overflow="ellipsis")
-    text.append(f"{mark or marker:1}", style or STYLE_SEQ)
+    gutter = STYLE_EVIDENCE if mark == MARKER_EVIDENCE else style or STYLE_SEQ
+    text.append(f"{mark or marker:1}", gutter)
     if cols.seq:
         text.append(f"{store.seq[i]:>{cols.seq}} ", STYLE_SEQ)
     untimed = math.isnan(store.t[i])

@@ -1,18 +1,22 @@
 """The TUI on every input kind, as ``eg2scope tui CAPTURE`` builds it, driven headless with
 Textual's Pilot on each session engine: the session thread ends without failing, and the
 store holds decode's records, bus by bus, in stream order (the TUI may merge the buses by
-capture time; each bus keeps its own order)."""
+capture time; each bus keeps its own order); the cycles panel holds the cycles ``eg2scope
+cycles --format jsonl`` finds, and the health lines end on the figures ``eg2scope stats
+--format json`` gives each bus (real processes)."""
 
 from __future__ import annotations
 
 import asyncio
 from contextlib import ExitStack
+from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Any
 
 import orjson
 import pytest
-from e2e_checks import force_session_engine, seq_names, skip_unless_native
+from e2e_checks import eg2scope, force_session_engine, seq_names, skip_unless_native
 from e2e_inputs import CAN_IDS, IDS
 from textual.worker import Worker, WorkerState
 
@@ -22,6 +26,8 @@ from analyzer.session.batches import RecordSequence
 from analyzer.session.session import Session
 from analyzer.tui.app import Eg2ScopeApp
 from analyzer.tui.launch import capture_plan
+from analyzer.tui.widgets.cycles import CyclesPanel
+from analyzer.tui.widgets.health import HealthLines
 
 SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
 SIZE = (200, 50)
@@ -38,7 +44,39 @@ def stored_by_bus(app: Eg2ScopeApp) -> dict[str, list[dict[str, Any]]]:
     return buses
 
 
-async def replayed(path: Path) -> tuple[Eg2ScopeApp, list[Session], list[BaseException]]:
+@dataclass
+class Replayed:
+    """``eg2scope tui PATH``'s app once its session has ended: the session (None: it never
+    ended), what its threads raised, the cycles panel's cycles and each bus's health line's
+    figures of the whole capture."""
+
+    app: Eg2ScopeApp
+    ended: list[Session]
+    failures: list[BaseException]
+    cycles: list[dict[str, Any]]
+    health: dict[str, dict[str, Any] | None]
+
+
+_REPLAYED: dict[tuple[str, str], Replayed] = {}
+
+
+def replayed_on(kind: str, engine: str, inputs: Any) -> Replayed:
+    """The TUI of ``kind`` on ``engine`` (the caller forces it), run once per cell."""
+    if (kind, engine) not in _REPLAYED:
+        _REPLAYED[kind, engine] = asyncio.run(replayed(inputs[kind]))
+    return _REPLAYED[kind, engine]
+
+
+@cache
+def command_json(command: str, path: Path) -> bytes:
+    """``eg2scope COMMAND PATH`` as a real process: ``cycles`` in JSONL, ``stats`` in JSON."""
+    fmt = "jsonl" if command == "cycles" else "json"
+    proc = eg2scope(command, str(path), "--format", fmt, cwd=path.parent)
+    assert proc.returncode == 0, proc.stderr.decode()
+    return proc.stdout
+
+
+async def replayed(path: Path) -> Replayed:
     """``eg2scope tui PATH``'s app, run until its session thread has ended (or failed)."""
     failures: list[BaseException] = []
 
@@ -55,12 +93,20 @@ async def replayed(path: Path) -> tuple[Eg2ScopeApp, list[Session], list[BaseExc
                 while not failures and not app.done and waited < TIMEOUT_S:
                     await pilot.pause(0.1)
                     waited += 0.1
+                await pilot.pause(0.2)  # the last updates land
+                cycles = [c.to_dict() for c in app.query_one(CyclesPanel).cycles]
+                lines = app.query_one(HealthLines).lines
+                health = {bus: line.whole for bus, line in lines.items()}
                 await pilot.press("q")
         finally:
             if app.session is not None:
                 app.session.stop()
     ended = [app.session] if app.done and app.session is not None else []
-    return app, ended, failures
+    return Replayed(app, ended, failures, cycles, health)
+
+
+def by_start(cycles: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return sorted(cycles, key=lambda c: (c["bus"], c["device"], c["start_seq"]))
 
 
 @pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
@@ -68,7 +114,8 @@ def test_tui_store_holds_decodes_records(kind: str, engine: str, inputs, referen
     if engine == "native":
         skip_unless_native()
     force_session_engine(monkeypatch, engine)
-    app, ended, failures = asyncio.run(replayed(inputs[kind]))
+    run = replayed_on(kind, engine, inputs)
+    app, ended, failures = run.app, run.ended, run.failures
     assert not failures, f"the session thread failed: {failures[0]!r}"
     assert ended, f"the session never ended within {TIMEOUT_S} s"
     assert ended[0].options.engine == engine
@@ -80,3 +127,20 @@ def test_tui_store_holds_decodes_records(kind: str, engine: str, inputs, referen
         b: seq_names(r) for b, r in expected.items()
     }
     assert stored == expected
+
+
+@pytest.mark.parametrize(("kind", "engine"), SESSION_CELLS)
+def test_tui_cycles_and_health_are_the_commands(kind: str, engine: str, inputs, monkeypatch):
+    """The cycles panel: ``cycles``'s cycles; each bus's health line at the end: ``stats``'s
+    figures of the bus (a raw dump's: no timing)."""
+    if engine == "native":
+        skip_unless_native()
+    force_session_engine(monkeypatch, engine)
+    run = replayed_on(kind, engine, inputs)
+    assert run.ended and not run.failures
+    path = inputs[kind]
+    expected = [orjson.loads(line) for line in command_json("cycles", path).splitlines()]
+    assert expected, "no cycles in this input: nothing is checked"
+    assert by_start(run.cycles) == by_start(expected)
+    buses = orjson.loads(command_json("stats", path))["buses"]
+    assert run.health == {b["bus"]: b for b in buses}

@@ -44,8 +44,8 @@ def _app(path: Path) -> Eg2ScopeApp:
     reader = open_reader(opts)
     source = ReplaySource(reader, None)
 
-    def build(feed: object) -> Session:
-        return Session(source, [feed], SessionOptions(protocol=byte_protocol(opts)))
+    def build(tui: list) -> Session:
+        return Session(source, tui, SessionOptions(protocol=byte_protocol(opts)))
 
     return Eg2ScopeApp(SessionPlan(build, live=False, replay=source, title=path.name))
 

@@ -108,6 +108,27 @@ def eg2scope(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[st
 
 
 @pytest.fixture(scope="session")
+def tour(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The scenario ``tour`` (every grip outcome, a stall, a dropped answer, a bus-off) recorded
+    by real ``eg2scope record --demo --scenario tour`` processes, at once: on the three buses
+    ("mixed") and on CAN alone ("can", which the native engine decodes); each folder holds
+    ``tour.mcap`` and the simulator's truth, ``tour.truth.jsonl``."""
+    from scenario_capture import record_argv  # tests/: not on the benchmarks' path
+
+    folders = {"mixed": None, "can": "can"}
+    made = {kind: tmp_path_factory.mktemp(f"tour-{kind}") for kind in folders}
+    procs = [
+        subprocess.Popen(record_argv("tour", made[kind], buses), cwd=ROOT, text=True,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        for kind, buses in folders.items()
+    ]  # fmt: skip
+    for proc in procs:
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 0, err
+    return {kind: folder / "tour.mcap" for kind, folder in made.items()}
+
+
+@pytest.fixture(scope="session")
 def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Every kind of input, made the way a user makes it."""
     folder = tmp_path_factory.mktemp("inputs")

@@ -43,8 +43,8 @@ def failing_app(path: Path) -> Eg2ScopeApp:
     reader = open_reader(CaptureOptions(str(path)))
     source = ReplaySource(reader)
 
-    def build(feed) -> Session:
-        return Session(source, [feed], SessionOptions(protocol="auto"))
+    def build(tui) -> Session:
+        return Session(source, tui, SessionOptions(protocol="auto"))
 
     return Eg2ScopeApp(SessionPlan(build, live=False, replay=source, title=path.name))
 

@@ -1,7 +1,7 @@
 """SVG snapshots (pytest-textual-snapshot) of the main screen at 80x24, 120x35 and 200x50,
-the detail pane, the help screen and the command palette, on fixed captures replayed to their
-end: fixed data, and every age measured on the capture's own clock, so the pictures are
-stable. Update with ``--snapshot-update`` (and look at what changed)."""
+the detail pane, the help screen, the command palette and the cycles panel, on fixed captures
+replayed to their end: fixed data, and every age measured on the capture's own clock, so the
+pictures are stable. Update with ``--snapshot-update`` (and look at what changed)."""
 
 from __future__ import annotations
 
@@ -83,3 +83,19 @@ def test_command_palette(snap_compare) -> None:
 
     app = capture_app(CAPTURES / "serial_session.bin")
     assert snap_compare(app, terminal_size=SIZES["80x24"], run_before=palette)
+
+
+@pytest.mark.parametrize("size", ["80x24", "200x50"])
+def test_cycles_panel_and_a_chosen_cycles_frames(snap_compare, size: str) -> None:
+    """The cycles panel (c) under the frame list and the health line; Enter on the second
+    cycle selects its command and marks the frames that decided it (◆)."""
+
+    async def chosen(pilot) -> None:
+        await replayed(pilot)
+        await pilot.press("c", "up", "enter")
+        await pilot.pause(0.3)
+        pilot.app.clear_notifications()  # the toast would hide the panel's right end
+        await pilot.pause()
+
+    app = capture_app(CAPTURES / "can_pick_place.log")
+    assert snap_compare(app, terminal_size=SIZES[size], run_before=chosen)

@@ -90,7 +90,7 @@ def test_tui_demo_in_a_real_terminal(tmp_path: Path) -> None:
     out = tmp_path / "demo.mcap"
     term = Terminal([sys.executable, "-m", "analyzer", "tui", "--demo", "-o", str(out)])
     try:
-        term.wait_for("command palette")  # the footer
+        term.wait_for("commands")  # the footer
         term.wait_for("rs485")  # frames and the device panel's gripper rows
         term.child.send("?")
         assert "every key" in term.wait_for("every key")

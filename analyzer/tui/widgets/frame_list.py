@@ -28,7 +28,7 @@ from textual.strip import Strip
 from ..filter import CompiledFilter
 from ..layout import RowLayout, row_layout
 from ..messages import RowSelected
-from ..rows import STYLE_MATCH, TimeMode, render_row
+from ..rows import MARKER_EVIDENCE, STYLE_MATCH, TimeMode, render_row
 from ..store import OK, RecordStore
 
 
@@ -63,6 +63,7 @@ class FrameList(ScrollView, can_focus=True):
         self.reference: int | None = None  # store index of the time reference
         self.search: re.Pattern[str] | None = None
         self.marks: dict[str, int] = {}  # letter -> store index
+        self.evidence: frozenset[int] = frozenset()  # store indices of the chosen cycle's frames
         self.new_while_paused = 0
         self._cache: LRUCache[tuple[Any, ...], Strip] = LRUCache(2048)
         self._styles: tuple[Style, Style] | None = None  # (base, cursor): looked up per theme
@@ -288,6 +289,8 @@ class FrameList(ScrollView, can_focus=True):
         store = self.store
         reference = None if self.reference is None else store.time(self.reference)
         mark = next((letter for letter, i in self.marks.items() if i == index), "")
+        if not mark and index in self.evidence:
+            mark = MARKER_EVIDENCE
         text = render_row(
             store,
             index,

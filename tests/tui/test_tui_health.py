@@ -1,0 +1,161 @@
+"""The health line of each bus (issue 20), driven with Textual's Pilot: on the scenario ``tour``
+(three buses, a bus-off on CAN) each bus's seconds add up to what ``eg2scope stats --format
+json`` counts (a real process), the highest load of a whole second is stats' ``max``, and at
+the end the line shows stats' figures of the whole capture; a raw dump, which has no times,
+says so and shows no load; live, every bus of the demo has its load and frames per second."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import CAPTURES, SIZES, capture_app, demo_app, eg2scope, tui_opts, until
+
+from analyzer.health.bus import NO_TIMING
+from analyzer.health.seconds import HealthSecond
+from analyzer.sim.rig import DemoRig
+from analyzer.sources.tap_options import make_taps
+from analyzer.tui.bus_rates import live_rates
+from analyzer.tui.messages import HealthUpdate
+from analyzer.tui.widgets.health import BusHealthLine, HealthLines, health_text
+
+
+def stats_buses(path: Path) -> dict[str, dict[str, Any]]:
+    done = eg2scope("stats", str(path), "--format", "json")
+    assert done.returncode == 0, done.stderr
+    return {b["bus"]: b for b in json.loads(done.stdout)["buses"]}
+
+
+async def replayed(path: Path, size: str) -> tuple[list[HealthUpdate], HealthLines]:
+    """The health updates the app got while it replayed the capture, and the lines at the end."""
+    updates: list[HealthUpdate] = []
+
+    def hook(message: Any) -> None:
+        if isinstance(message, HealthUpdate):
+            updates.append(message)
+
+    app = capture_app(path)
+    try:
+        async with app.run_test(size=SIZES[size], message_hook=hook) as pilot:
+            await until(pilot, lambda: app.done, timeout=60)
+            await pilot.pause(0.3)
+            lines = app.query_one(HealthLines)
+            await pilot.press("q")
+    finally:
+        app.session.stop()
+    return updates, lines
+
+
+def shown(lines: HealthLines) -> list[str]:
+    return str(lines.render()).splitlines()
+
+
+def test_each_buses_seconds_add_up_to_stats_and_the_end_shows_its_figures(
+    tour: dict[str, Path],
+) -> None:
+    path = tour["mixed"]
+    updates, lines = asyncio.run(replayed(path, "200x50"))
+    stats = stats_buses(path)
+    assert set(lines.lines) == set(stats) == {"rs232", "rs485", "can0"}
+    rows: dict[str, list[HealthSecond]] = {}
+    for update in updates:
+        for row in update.seconds:
+            rows.setdefault(row.bus, []).append(row)
+    assert [u.whole is not None for u in updates].count(True) == 1  # at the end, once
+    for bus, figures in stats.items():
+        seconds = rows[bus]
+        assert [r.second for r in seconds] == sorted(r.second for r in seconds)  # in order
+        assert sum(r.frames for r in seconds) == figures["frames"]
+        assert sum(r.bits for r in seconds) == figures["bits"]
+        # each second's load (a second may come in two parts: see BusHealthLine.add); the
+        # first and the last are cut by the bus's span
+        loads: dict[int, float] = {}
+        for r in seconds:
+            loads[r.second] = loads.get(r.second, 0.0) + (r.load_pct or 0.0)
+        whole = list(loads.values())[1:-1]
+        assert len(whole) >= 3, bus
+        assert max(whole) == pytest.approx(figures["load_pct"]["max"], abs=0.002)
+        assert lines.lines[bus].peak == pytest.approx(figures["load_pct"]["max"], abs=0.002)
+        assert lines.lines[bus].whole == figures  # stats' own figures, at the end
+    text = "\n".join(shown(lines))
+    for bus, figures in stats.items():
+        line = next(line for line in shown(lines) if line.startswith(bus))
+        load = figures["load_pct"]
+        assert f"load {load['mean']:.1f}% mean {load['max']:.1f}% max" in line, line
+        assert f"{figures['frames_per_s']:,.0f} frames/s" in line, line
+    assert any(r.state == "bus_off" for r in rows["can0"])  # the tour's bus-off
+    assert "no errors" not in next(line for line in text.splitlines() if line.startswith("can0"))
+
+
+def test_a_raw_dump_says_it_has_no_timing_rather_than_a_load() -> None:
+    path = CAPTURES / "serial_session.bin"
+    updates, lines = asyncio.run(replayed(path, "80x24"))
+    stats = stats_buses(path)["serial"]
+    assert stats["timing"] == NO_TIMING
+    assert not [row for u in updates for row in u.seconds]  # no second is made up
+    (line,) = shown(lines)
+    assert NO_TIMING in line and "%" not in line and "/s" not in line, line
+    assert (
+        f"{stats['frames']} frames" in line and f"{stats['error_frames']['total']} errors" in line
+    )
+
+
+def test_a_second_is_shown_with_its_load_frames_errors_state_and_event() -> None:
+    """The line while a session runs: the latest second's figures as the rows give them."""
+    line = BusHealthLine("can0")
+    for second, load, worst in ((10, 3.0, None), (11, 7.25, "no ACK"), (12, 5.5, None)):
+        state = "bus_off" if second == 12 else "error_active"
+        line.add(HealthSecond("can0", "can", second, 90, 500, load, 2, state, worst), whole=True)
+    text = health_text(line, now=14.5, live=True).plain
+    assert text.startswith("can0") and "load  5.5% max 7.2%" in text, text
+    assert "90 frames/s" in text and "2 errors/s" in text and "bus off" in text, text
+    assert "quiet 2 s" not in text and "no ACK 3 s ago" in text, text
+    assert "quiet 4 s" in health_text(line, now=17.0, live=True).plain
+    short = health_text(line, now=14.5, live=True, narrow=True).plain
+    assert "90 fr/s 2 err/s" in short and len(short) < len(text), short
+    # the rest of a second shown already (a serial frame found after a later read): added
+    line.add(HealthSecond("can0", "can", 12, 10, 60, 2.5, 0, "bus_off", None), whole=True)
+    text = health_text(line, now=14.5, live=True).plain
+    assert "load  8.0% max 8.0%" in text and "100 frames/s" in text, text
+
+
+def test_every_live_bus_has_its_load_and_frames_per_second() -> None:
+    async def scenario() -> None:
+        with DemoRig() as rig:
+            app = demo_app(rig)
+            async with app.run_test(size=SIZES["80x24"]) as pilot:
+                try:
+                    lines = app.query_one(HealthLines)
+                    buses = {"rs232", "rs485", "can0"}
+
+                    def measured() -> bool:
+                        found = lines.lines
+                        return set(found) >= buses and all(found[b].peak for b in buses)
+
+                    await until(pilot, measured, timeout=20)
+                    await pilot.pause(0.6)  # redrawn
+                    for text in shown(lines):
+                        bus = text.split()[0]
+                        last = lines.lines[bus].last
+                        assert last is not None and last.frames > 0
+                        assert f"{last.frames} fr/s" in text, text  # 80 columns: short units
+                        assert f"load {last.load_pct:.1f}%" in text, text
+                    await pilot.press("q")
+                finally:
+                    app.session.stop()
+
+    asyncio.run(scenario())
+
+
+def test_a_live_bus_is_measured_at_the_rate_its_tap_was_opened_at() -> None:
+    """``--baud`` of a serial tap named later by its protocol (rs232 or rs485) and ``-b`` of
+    a CAN tap: the loads are of those rates, not the EG2's defaults."""
+    serial = make_taps(tui_opts("--serial", "/dev/ttyUSB7", "--baud", "9600").taps)
+    assert [t.named_by_protocol for t in serial] == [True]
+    rates = live_rates(serial)
+    assert rates.serial("rs232").value == rates.serial("rs485").value == 9600
+    can = make_taps(tui_opts("-i", "virtual", "-c", "tui-rates", "-b", "250000").taps)
+    assert live_rates(can).can(can[0].bus).value == 250_000
