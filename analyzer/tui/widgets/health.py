@@ -9,7 +9,7 @@ rather than show a load or a rate; a live bus that has gone quiet says for how l
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final
 
 from rich.style import Style
@@ -19,7 +19,6 @@ from textual.widgets import Static
 from decoders.can_errors import ERROR_ACTIVE
 
 from ...health.bus import NO_TIMING
-from ...health.figures import PERCENT_DIGITS
 
 if TYPE_CHECKING:
     from ...health.seconds import HealthSecond
@@ -51,8 +50,6 @@ class BusHealthLine:
     whole: dict[str, Any] | None = None
 
     def add(self, row: HealthSecond, whole: bool) -> None:
-        if self.last is not None and row.second == self.last.second:
-            row = rest_of(self.last, row)
         if self.first is None:
             self.first = row.second
         load = row.load_pct
@@ -61,22 +58,6 @@ class BusHealthLine:
         self.last = row
         if row.worst is not None:
             self.event = (row.second, row.worst)
-
-
-def rest_of(shown: HealthSecond, late: HealthSecond) -> HealthSecond:
-    """A second shown already and the rest of it, come later (a serial frame that ended in it
-    was found after a later read had closed it): one second."""
-    load = None
-    if shown.load_pct is not None and late.load_pct is not None:
-        load = round(shown.load_pct + late.load_pct, PERCENT_DIGITS)
-    return replace(
-        late,
-        frames=shown.frames + late.frames,
-        bits=shown.bits + late.bits,
-        load_pct=load,
-        errors=shown.errors + late.errors,
-        worst=late.worst or shown.worst,
-    )
 
 
 def ago(seconds: float) -> str:
