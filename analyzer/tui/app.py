@@ -69,7 +69,8 @@ class SessionPlan:
     """How the app gets its session: ``build(feed)`` makes it with the feed among its
     listeners. ``live``: taps (ages by the wall clock) or a capture; ``replay``: the capture
     source, for pause and speed; ``recorder``: where marks go; ``freeze_on``: the armed
-    trigger; ``title``: what is watched; ``notes``: what outputs say while the app runs."""
+    trigger; ``title``: what is watched; ``notes``: what outputs say while the app runs;
+    ``keep``: how many of the newest records the store keeps (None: every one)."""
 
     build: Callable[[TuiFeed], Session]
     live: bool = True
@@ -79,6 +80,7 @@ class SessionPlan:
     freeze_on: str | None = None
     title: str = "eg2scope"
     notes: Notes | None = None
+    keep: int | None = None
 
 
 class Eg2ScopeApp(App[int]):
@@ -96,7 +98,7 @@ class Eg2ScopeApp(App[int]):
         apply); it starts when the app does."""
         super().__init__()
         self.plan = plan
-        self.store = store if store is not None else RecordStore()
+        self.store = store if store is not None else RecordStore(plan.keep)
         self.feed = TuiFeed(self.store, live=plan.live)
         self.feed.recorder = plan.recorder
         session = self.session = plan.build(self.feed)
@@ -335,8 +337,10 @@ class Eg2ScopeApp(App[int]):
         if frames.filter is None:
             parts.append(f"{frames.known:,} records")
         else:
-            shown = f"{frames.row_count:,} of {frames.known:,} shown"
+            shown = f"{frames.row_count:,} of {frames.known - frames.first:,} shown"
             parts.append(f"{shown} (filter: {frames.filter.text})")
+        if frames.first:
+            parts.append(f"keeping the last {self.store.keep:,}")
         if self.dropped:
             parts.append(f"{self.dropped:,} DROPPED")
         if frames.marks:
@@ -380,7 +384,7 @@ class Eg2ScopeApp(App[int]):
     def _show_detail(self, index: int | None) -> None:
         tree = self.main_screen.query_one(DetailTree)
         hexpane = self.main_screen.query_one(HexPane)
-        if index is None:
+        if index is None or index < self.store.first:  # (dropped since: the next one comes)
             tree.show(None)
             hexpane.show(b"")
             return
@@ -416,6 +420,9 @@ class Eg2ScopeApp(App[int]):
 
     def go_to_index(self, index: int) -> None:
         frames = self.frames
+        if index < frames.first:
+            self.notify(f"that frame is no longer kept (the last {self.store.keep:,} are)")
+            return
         if not frames.jump_to_index(index):
             self.notify("that frame is hidden by the filter: filter cleared")
             self.main_screen.query_one("#filter", Input).value = ""

@@ -39,7 +39,8 @@ class TuiOptions:
     """``eg2scope tui``'s options, typed. ``live``: the live session's (its recording, its
     end, ``--rerun``); ``taps``: the live sources; ``capture``: the capture to replay instead
     (None: live); ``demo``: the simulated buses to watch instead (None: none); ``engine``: the
-    session's decoding; ``freeze_on``: the trigger armed at the start (None: none)."""
+    session's decoding; ``freeze_on``: the trigger armed at the start (None: none); ``keep``:
+    how many of the newest records the TUI keeps (None: every one)."""
 
     live: LiveOptions
     taps: TapOptions
@@ -47,6 +48,7 @@ class TuiOptions:
     demo: DemoOptions | None = None
     engine: str = "auto"
     freeze_on: str | None = None
+    keep: int | None = None
 
     @property
     def path(self) -> str | None:
@@ -147,6 +149,7 @@ def live_plan(
         recording_path=live.output,
         freeze_on=opts.freeze_on,
         title=f"live: {names}",
+        keep=opts.keep,
     )
 
 
@@ -178,6 +181,7 @@ def capture_plan(
         replay=source,
         freeze_on=opts.freeze_on,
         title=f"capture: {capture.path}",
+        keep=opts.keep,
     )
 
 

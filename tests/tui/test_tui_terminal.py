@@ -380,6 +380,17 @@ def test_a_signal_ends_the_live_tui_at_once(tmp_path: Path, sig: signal.Signals)
         assert list(reader) and not reader.damaged
 
 
+def test_keep_says_the_oldest_go_in_a_real_terminal() -> None:
+    term = Terminal(tui("--demo", "--keep", "1000"), SIZES["200x50"])
+    try:
+        term.wait_for("keeping the last 1,000", timeout=60)
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+
+
 def test_the_live_tui_ends_when_its_terminal_goes() -> None:
     """The pty's master closed (the window, the ssh connection, the script driving it gone):
     the kernel hangs the terminal up (SIGHUP to its session): the app ends, 0, at once."""
