@@ -408,17 +408,15 @@ def test_the_live_tui_ends_when_its_terminal_goes() -> None:
     assert term.child.exitstatus == 0
 
 
-@pytest.mark.parametrize(
-    ("argv", "want"),
-    [(["--demo"], 0), ([str(ROOT / "captures" / "can_pick_place.log"), "--speed", "1"], 130)],
-    ids=["live", "replay"],
-)
+@pytest.mark.parametrize(("kind", "want"), [("live", 0), ("replay", 130)])
 def test_a_tui_on_a_terminal_that_hangs_up_without_a_signal_ends(
-    argv: list[str], want: int
+    inputs: dict[str, Path], kind: str, want: int
 ) -> None:
     """A terminal that is not the process's controlling one sends no SIGHUP when it goes: the
     app sees the hang-up itself and ends (live 0; a replay cut short 130), where Textual alone
     read the ended input in a busy loop and its writes then waited forever (SIGTERM too)."""
+    argv = ["--demo"] if kind == "live" else [str(inputs["demo recording"]), "--speed", "1"]
+    ready = "ID 1" if kind == "live" else "replay playing"
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
     env = {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "TEXTUAL_ANIMATIONS": "none"}
@@ -431,10 +429,10 @@ def test_a_tui_on_a_terminal_that_hangs_up_without_a_signal_ends(
         screen = pyte.Screen(80, 24)
         stream = pyte.ByteStream(screen)
         end = time.monotonic() + 30
-        while "ID 1" not in "\n".join(screen.display) and time.monotonic() < end:
+        while ready not in "\n".join(screen.display) and time.monotonic() < end:
             if select.select([master], [], [], 0.1)[0]:
                 stream.feed(os.read(master, 65536))
-        assert "ID 1" in "\n".join(screen.display), "\n".join(screen.display)
+        assert ready in "\n".join(screen.display), "\n".join(screen.display)
         os.close(master)
         master = -1
         assert proc.wait(timeout=10) == want
