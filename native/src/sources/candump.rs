@@ -17,13 +17,15 @@
 //! - a cut or damaged .gz yields what Python's gzip module yields before raising: every whole
 //!   line before the damage (LF files), whole 1 MiB blocks (CR files), nothing at all when the
 //!   damage is inside the line that crosses the first 64 KiB, and the whole head when the
-//!   damage is inside the first 64 KiB; then `line N: read error: Type: message`;
+//!   damage is inside the first 64 KiB (but the line the damage cuts: it is part of it);
+//!   then one error in words (compressed.rs), or `line N: read error: Type: message`;
 //! - -tA dates go through the C library's `mktime`, as Python's `time.mktime` does (on Unix;
 //!   elsewhere `DecodeRun::open` leaves such logs to the Python engine).
 //!
 //! The gzip container is read here (header, CRC and size checks, members, zero padding, in
 //! Python's order and words); the deflate data through flate2. A corrupt deflate stream
-//! (zlib.error) is damage like a cut file: `line N: read error: error: Error -3 ...`.
+//! (zlib.error) is damage like a cut file: `line N: the compressed data is damaged (Error -3
+//! ...); the rest is lost`.
 
 use std::borrow::Cow;
 use std::fs::File;
