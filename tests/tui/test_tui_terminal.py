@@ -35,7 +35,9 @@ ROW = re.compile(r"^.\s*(?:\d+\s+)?(-|#\d+|[\d.]+)\s+(\S+)\s+([→←·])\s+(ID 
 
 
 class Terminal:
-    def __init__(self, argv: list[str], size: tuple[int, int] = (COLUMNS, LINES)) -> None:
+    def __init__(
+        self, argv: list[str], size: tuple[int, int] = (COLUMNS, LINES), **env: str
+    ) -> None:
         columns, lines = size
         self.screen = pyte.Screen(columns, lines)
         self.stream = pyte.ByteStream(self.screen)
@@ -45,7 +47,12 @@ class Terminal:
             argv[1:],
             cwd=str(ROOT),
             dimensions=(lines, columns),
-            env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "TEXTUAL_ANIMATIONS": "none"},
+            env={
+                "TERM": "xterm-256color",
+                "PATH": "/usr/bin:/bin",
+                "TEXTUAL_ANIMATIONS": "none",
+                **env,
+            },
         )
 
     def read(self) -> None:
@@ -389,6 +396,21 @@ def test_keep_says_the_oldest_go_in_a_real_terminal() -> None:
         if term.child.isalive():
             term.child.terminate(force=True)
     assert status == 0, term.after()
+
+
+def test_no_color_runs_the_tui_in_monochrome() -> None:
+    """NO_COLOR=1: Textual's monochrome filter reads every segment's style; a row padded with
+    no style crashed the app at its first short row."""
+    term = Terminal(tui("--demo"), SIZES["80x24"], NO_COLOR="1")
+    try:
+        term.wait_for("rs485")
+        time.sleep(2.0)
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+    assert b"Traceback" not in term.raw and b"AttributeError" not in term.raw
 
 
 def test_the_live_tui_ends_when_its_terminal_goes() -> None:

@@ -34,6 +34,8 @@ from ..messages import RowSelected
 from ..rows import STYLE_MATCH, TimeMode, render_row
 from ..store import OK, RecordStore
 
+NO_STYLE = Style()  # padding: as no style, but one a filter can read
+
 
 class FrameList(ScrollView, can_focus=True):
     """See the module doc."""
@@ -308,7 +310,9 @@ class FrameList(ScrollView, can_focus=True):
         if strip is None:
             strip = self._render_row(index, previous, is_cursor)
             self._cache[key] = strip
-        return strip.crop_extend(scroll_x, scroll_x + width, None)
+        # padded with an empty style, not None: a segment without one fails Textual's
+        # monochrome filter (NO_COLOR=1), which crashed the app at its first short row
+        return strip.crop_extend(scroll_x, scroll_x + width, NO_STYLE)
 
     def _render_row(self, index: int, previous: int | None, is_cursor: bool) -> Strip:
         store = self.store
@@ -332,5 +336,5 @@ class FrameList(ScrollView, can_focus=True):
             text.stylize(cursor)
         line = text.render(self.app.console)
         return Strip(list(line), text.cell_len).extend_cell_length(
-            self._layout.width, cursor if is_cursor else None
+            self._layout.width, cursor if is_cursor else NO_STYLE
         )
