@@ -3,7 +3,8 @@
 - ``Closing``: ``with reader:`` gives the object and closes it at the end (capture readers,
   the MCAP recorder, the virtual serial line).
 - ``Running``: ``with server:`` starts the object and stops it at the end (simulated
-  grippers, the demo rig).
+  grippers, the demo rig); a start that fails part-way (Ctrl-C or SIGTERM while the demo rig
+  starts its buses) stops what it had started.
 """
 
 from __future__ import annotations
@@ -36,7 +37,11 @@ class Running:
         raise NotImplementedError
 
     def __enter__(self) -> Self:
-        self.start()
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
         return self
 
     def __exit__(

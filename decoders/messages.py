@@ -245,6 +245,14 @@ LINT_TOO_CLOSE: Final = Message(
 )
 
 
+# -- a capture file's damage: a compressed file cut short or damaged (analyzer/sources/
+# compressed.py; the crate's candump and .gz readers). No flag code: the reader's ``errors``
+CAPTURE_GZIP_CUT: Final = "the compressed file is cut short"
+CAPTURE_GZIP_DAMAGED: Final = "the compressed data is damaged"
+CAPTURE_NOT_GZIP: Final = "not gzip data, though its name ends in .gz"
+CAPTURE_REST_LOST: Final = "the rest is lost"
+
+
 def _catalogue() -> dict[str, dict[str, Message]]:
     """Flag code -> message name -> message, in the order the messages are written above."""
     out: dict[str, dict[str, Message]] = {}

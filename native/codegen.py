@@ -585,6 +585,11 @@ def messages_module() -> list[str]:
         if name.startswith("GARBAGE_"):
             reasons.append(f"{INDENT}pub const {name}: &str = {rs_str(text)};")
     parts.append(reasons)
+    damage = [f"{INDENT}// a capture file's damage: a compressed file cut short or damaged"]
+    for name, text in vars(messages).items():
+        if name.startswith("CAPTURE_"):
+            damage.append(f"{INDENT}pub const {name}: &str = {rs_str(text)};")
+    parts.append(damage)
     note = "decoders/messages.py: the errors' and warnings' words, by flag code."
     return module("messages", note, blank_separated(parts))
 

@@ -8,11 +8,13 @@ from typing import Any
 
 from ..session.engine import ENGINES
 from ..tui.launch import TuiOptions, run_tui
+from ..tui.store import LIVE_KEEP
 from .common import (
     add_rerun_argument,
     add_session_arguments,
     capture_options,
     live_options,
+    positive_int,
     speed_type,
 )
 from .demo import add_demo_arguments, demo_options
@@ -75,6 +77,15 @@ def add_subparser(sub: Any) -> None:
         "python: the Python decoders and tracker; native: the native core (a usage error "
         "where the input is not CAN or the core is not built)",
     )
+    parser.add_argument(
+        "--keep",
+        type=keep_type,
+        default=None,
+        metavar="N",
+        help=f"records the TUI keeps to show, the oldest dropped first (memory stays bounded "
+        f"in a session that runs for hours; a recording keeps everything): default the last "
+        f"{LIVE_KEEP:,} of a live session, every record of a capture file; 'all': every one",
+    )
     add_source_arguments(parser)
     add_session_arguments(parser, record_required=False)
     add_rerun_argument(parser)
@@ -91,7 +102,21 @@ def tui_options(args: argparse.Namespace) -> TuiOptions:
         demo=demo_options(args) if args.demo else None,
         engine=args.engine,
         freeze_on=args.freeze_on,
+        keep=keep_option(args),
     )
+
+
+def keep_type(text: str) -> int:
+    """argparse type of --keep: a number of records, or 'all' (0)."""
+    return 0 if text.strip().lower() == "all" else positive_int(text)
+
+
+def keep_option(args: argparse.Namespace) -> int | None:
+    """How many records the store keeps (None: every one): --keep, else the default of a live
+    session or of a capture file (bounded by the file)."""
+    if args.keep is None:
+        return None if args.file else LIVE_KEEP
+    return args.keep or None
 
 
 def run(args: argparse.Namespace) -> int:

@@ -340,12 +340,35 @@ def decode_part(part: Part) -> PartResult:
     return worker.result
 
 
+# Ctrl-C and a terminal's SIGHUP go to the whole process group: the parent alone reports them,
+# once; SIGTERM is how Pool.terminate ends a worker
+_IGNORED_BY_WORKERS = (signal.SIGINT, signal.SIGHUP)
+_HELD_WHILE_FORKING = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+
+
 def _worker_init() -> None:
-    # Ctrl-C goes to the whole process group: the parent alone reports it, once; the parent's
-    # SIGTERM handler (an interrupt) is not the workers': Pool.terminate ends them with it
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # forked with these signals held (``_start_pool``): the parent's handlers (an interrupt)
+    # are not the workers', so they are set before any signal gets through
+    for sig in _IGNORED_BY_WORKERS:
+        signal.signal(sig, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD_WHILE_FORKING)
     gc.disable()  # records hold no cycles (see session.rare_gc)
+
+
+def _start_pool(workers: int) -> tuple[Any, set[int | signal.Signals]]:
+    """A pool of ``workers`` forked processes, and the signal mask to restore once the caller
+    can stop the pool. Ctrl-C, SIGTERM and SIGHUP are held meanwhile: a worker forked before
+    its ``_worker_init`` would run the parent's handler (a KeyboardInterrupt traceback when
+    ``Pool.terminate`` reaches it), and a parent interrupted inside the forking lost the
+    interrupt in a fork hook ("Exception ignored") and exited 0."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD_WHILE_FORKING)
+    try:
+        pool = multiprocessing.get_context("fork").Pool(workers, initializer=_worker_init)
+    except BaseException:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        raise
+    return pool, held
 
 
 # -- the parent --------------------------------------------------------------------------------
@@ -421,9 +444,10 @@ def run_parallel(
     waiting: deque[tuple[Part, Any]] = deque()  # in file order: handed out, not yet written
     total = 0
     prev: PartResult | None = None
-    ctx = multiprocessing.get_context("fork")
-    with ctx.Pool(min(cores - 1, len(parts)), initializer=_worker_init) as pool:
+    pool, held = _start_pool(min(cores - 1, len(parts)))
+    with pool:
         try:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a signal held arrives here
             for part in todo:  # the workers start on the first parts ...
                 waiting.append((part, pool.apply_async(decode_part, (part,))))
                 if len(waiting) >= cores - 1:

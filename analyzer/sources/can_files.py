@@ -48,6 +48,7 @@ from ..lifecycle import Closing
 from . import candump, pcan_trc, sniff
 from .can_lines import FORMATS, LineFeed, next_noted
 from .can_message import message_to_frame
+from .compressed import compression_damage
 
 if TYPE_CHECKING:  # python-can is imported when one of its formats is read: 0.1 s at start-up
     import can
@@ -177,7 +178,8 @@ class _TextLogReader(_FileReaderBase):
 
     def _read_error(self, lineno: int, exc: BaseException) -> None:
         self._framed()
-        self._error(f"line {lineno}: read error: {type(exc).__name__}: {exc}")
+        words = compression_damage(exc, at_start=lineno == 1)
+        self._error(f"line {lineno}: {words or f'read error: {type(exc).__name__}: {exc}'}")
 
 
 GIVE_UP = 5  # bad lines before the first frame that make a file no log of its kind
@@ -451,7 +453,7 @@ class PythonCanFileReader(_FileReaderBase):
         for text in self._held or ():
             self._error(text)
         if feed.read_error is not None:
-            self._error(f"read error after line {feed.number}: {_exc_text(feed.read_error)}")
+            self._error(_read_error_text(feed.read_error, feed.number))
 
     def _line_error(self, text: str) -> None:
         """A line that is no frame: damage, or (before any frame) a sign the file is no log."""
@@ -590,6 +592,14 @@ def _data_match_dlc(msg: can.Message) -> bool:
 
         return n in (msg.dlc, dlc2len(min(msg.dlc, 15)))
     return n == min(msg.dlc, 8)
+
+
+def _read_error_text(exc: BaseException, lines: int) -> str:
+    """A python-can log's read error after ``lines`` lines: a .gz cut or damaged in words."""
+    words = compression_damage(exc, at_start=lines == 0)
+    if words is None:
+        return f"read error after line {lines}: {_exc_text(exc)}"
+    return f"after line {lines}: {words}" if lines else words
 
 
 def _exc_text(exc: BaseException) -> str:

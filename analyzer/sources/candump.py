@@ -28,7 +28,7 @@ import itertools
 import time
 import zlib
 from collections.abc import Iterator
-from typing import IO
+from typing import IO, Final
 
 from decoders.model import CanFrame
 
@@ -79,7 +79,9 @@ class ByteLines:
         head, f, error = self.head, self._f, self._error
         if self.cr:
             lines: Iterator[bytes] = _cr_lines(head, f if error is None else io.BytesIO())
-        elif error is not None or not head:
+        elif error is not None:  # the line the damage cut is part of it: said once, with it
+            lines = io.BytesIO(head[: head.rfind(b"\n") + 1])
+        elif not head:
             lines = io.BytesIO(head)
         else:
             if not head.endswith(b"\n"):
@@ -105,11 +107,15 @@ def _cr_lines(head: bytes, f: IO[bytes]) -> Iterator[bytes]:
 
 
 def quote(line: bytes, limit: int = MAX_QUOTED) -> str:
-    """A line for an error text: stripped, cut at ``limit`` characters, repr'd."""
-    text = line.decode("ascii", "replace").strip()
+    """A line for an error text: stripped, cut at ``limit`` characters, quoted as Python's
+    ``ascii`` does (a byte that is no ASCII shows as ``\\xff``, never as a stand-in)."""
+    text = line.decode("latin-1").strip(STRIPPED)
     if len(text) > limit:
         text = text[: limit - 3] + "..."
-    return repr(text)
+    return ascii(text)
+
+
+STRIPPED: Final = " \t\n\r\x0b\x0c\x1c\x1d\x1e\x1f"  # what str.strip takes of ASCII
 
 
 def reason(exc: BaseException) -> str:

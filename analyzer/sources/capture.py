@@ -34,6 +34,7 @@ from ..errors import UsageError
 from ..lifecycle import Closing
 from ..model import Item, SourceEvent
 from . import can_files, sniff
+from .compressed import compression_damage
 
 READ_SIZE = 1 << 16
 
@@ -124,9 +125,10 @@ class GzipBytesReader(CaptureReader):
                 self.position = self._raw.tell()
                 yield Item(bus, Chunk(data))
         except (OSError, EOFError, zlib.error) as exc:
+            after = f" after {total} bytes"
+            words = compression_damage(exc, at_start=total == 0, after=after)
             self.errors.append(
-                f"compressed data damaged or cut short after {total} bytes "
-                f"({type(exc).__name__}: {exc}); the rest is lost"
+                words or f"read error{after} ({type(exc).__name__}: {exc}); the rest is lost"
             )
         self.position = self.size
 

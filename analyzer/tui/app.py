@@ -82,7 +82,7 @@ class SessionPlan:
     clock) or a capture; ``replay``: the capture source, for pause and speed; ``recorder``:
     where marks go; ``freeze_on``: the armed trigger; ``title``: what is watched; ``notes``:
     what outputs say while the app runs; ``rates``: each bus's bit rate or baud (the bus load's
-    measure)."""
+    measure); ``keep``: how many of the newest records the store keeps (None: every one)."""
 
     build: Callable[[list[Listener]], Session]
     live: bool = True
@@ -93,6 +93,7 @@ class SessionPlan:
     title: str = "eg2scope"
     notes: Notes | None = None
     rates: BusRates = field(default_factory=BusRates)
+    keep: int | None = None
 
 
 class Eg2ScopeApp(App[int]):
@@ -110,7 +111,7 @@ class Eg2ScopeApp(App[int]):
         apply); it starts when the app does."""
         super().__init__()
         self.plan = plan
-        self.store = store if store is not None else RecordStore()
+        self.store = store if store is not None else RecordStore(plan.keep)
         self.feed = TuiFeed(self.store, live=plan.live)
         self.feed.recorder = plan.recorder
         self.cycles, self.cycle_feed = cycles_listener()
@@ -372,8 +373,10 @@ class Eg2ScopeApp(App[int]):
         if frames.filter is None:
             parts.append(f"{frames.known:,} records")
         else:
-            shown = f"{frames.row_count:,} of {frames.known:,} shown"
+            shown = f"{frames.row_count:,} of {frames.known - frames.first:,} shown"
             parts.append(f"{shown} (filter: {frames.filter.text})")
+        if frames.first:
+            parts.append(f"keeping the last {self.store.keep:,}")
         if self.dropped:
             parts.append(f"{self.dropped:,} DROPPED")
         if frames.marks:
@@ -417,7 +420,7 @@ class Eg2ScopeApp(App[int]):
     def _show_detail(self, index: int | None) -> None:
         tree = self.main_screen.query_one(DetailTree)
         hexpane = self.main_screen.query_one(HexPane)
-        if index is None:
+        if index is None or index < self.store.first:  # (dropped since: the next one comes)
             tree.show(None)
             hexpane.show(b"")
             return
@@ -453,6 +456,9 @@ class Eg2ScopeApp(App[int]):
 
     def go_to_index(self, index: int) -> None:
         frames = self.frames
+        if index < frames.first:
+            self.notify(f"that frame is no longer kept (the last {self.store.keep:,} are)")
+            return
         if not frames.jump_to_index(index):
             self.notify("that frame is hidden by the filter: filter cleared")
             self.main_screen.query_one("#filter", Input).value = ""

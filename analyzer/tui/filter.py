@@ -363,6 +363,7 @@ class CompiledFilter:
 
     def indices(self, store: RecordStore, start: int = 0, end: int | None = None) -> list[int]:
         end = store.count if end is None else end
+        start = max(start, store.first)  # the records a store dropped are gone
         if end <= start:
             return []
         constants = [resolve(store) for resolve in self.resolvers]

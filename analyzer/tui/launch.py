@@ -7,6 +7,7 @@ from __future__ import annotations
 import sys
 from contextlib import ExitStack, redirect_stderr
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_ERROR, UsageError
@@ -29,6 +30,7 @@ from ..sources.tap_options import TapOptions, make_taps
 from .bus_rates import live_rates
 from .notes import Notes
 from .replay import ReplaySource
+from .terminal import TerminalWatch
 
 if TYPE_CHECKING:
     from .app import Eg2ScopeApp, SessionPlan
@@ -39,7 +41,8 @@ class TuiOptions:
     """``eg2scope tui``'s options, typed. ``live``: the live session's (its recording, its
     end, ``--rerun``); ``taps``: the live sources; ``capture``: the capture to replay instead
     (None: live); ``demo``: the simulated buses to watch instead (None: none); ``engine``: the
-    session's decoding; ``freeze_on``: the trigger armed at the start (None: none)."""
+    session's decoding; ``freeze_on``: the trigger armed at the start (None: none); ``keep``:
+    how many of the newest records the TUI keeps (None: every one)."""
 
     live: LiveOptions
     taps: TapOptions
@@ -47,6 +50,7 @@ class TuiOptions:
     demo: DemoOptions | None = None
     engine: str = "auto"
     freeze_on: str | None = None
+    keep: int | None = None
 
     @property
     def path(self) -> str | None:
@@ -66,7 +70,10 @@ def run_tui(opts: TuiOptions) -> int:
         plan = session_plan(opts, stack, notes)
         plan.notes = notes
         app = _app(plan, opts.engine)
-        with signals_call(lambda: _stop_app(app)):  # as 'q' does, the recording finished
+        stop = partial(_stop_app, app)  # as 'q' does: the recording finished
+        terminal = TerminalWatch(stop)  # its window closed, the script driving it killed
+        app.driver_class = terminal.driver_class(app.driver_class)
+        with signals_call(stop), terminal:
             app.run()
         app.stop_session()  # however the app ended: the session closes every listener
     return finish(opts, app, notes)
@@ -145,6 +152,7 @@ def live_plan(
         recording_path=live.output,
         freeze_on=opts.freeze_on,
         title=f"live: {names}",
+        keep=opts.keep,
     )
 
 
@@ -177,6 +185,7 @@ def capture_plan(
         rates=rates_of_capture(reader.metadata),
         freeze_on=opts.freeze_on,
         title=f"capture: {capture.path}",
+        keep=opts.keep,
     )
 
 
@@ -237,10 +246,10 @@ def finish(opts: TuiOptions, app: Eg2ScopeApp, notes: Notes) -> int:
 
 
 def _stop_app(app: Any) -> None:
-    """Ctrl-C, SIGTERM or SIGHUP: end the session as an interrupt and quit as 'q' does."""
+    """Ctrl-C, SIGTERM, SIGHUP or the terminal gone: end the session as an interrupt and quit
+    as 'q' does. The quit is queued (from any thread) with the app's messages: it runs once the
+    app has mounted its panes (quitting in the middle of that fails in Textual), or not at all
+    when the app has ended."""
     if app.session is not None:
         app.session.interrupt()
-    try:
-        app.call_from_thread(app.action_quit)
-    except RuntimeError:  # the app is not running (yet, or any more)
-        app.exit(0)
+    app.call_later(app.action_quit)

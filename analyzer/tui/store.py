@@ -13,6 +13,13 @@ records' details wait as tuples.
 One thread appends (the session's), any thread reads: the columns only grow, ``count`` is
 published after a batch is complete, and readers look only below it. Block compression swaps
 the open block under ``lock``.
+
+A store given ``keep`` holds about that many of the newest records (a live session runs for
+hours: ``LIVE_KEEP`` by default): ``trim`` drops the oldest whole blocks once the store holds
+a tenth more. A record keeps its index for good (``first`` is the oldest one kept), so the
+frame list's marks and the panels' indexes never point at another record. ``trim`` is called
+on the thread that reads the columns (the app's, as the frame list takes new records in), so
+nothing it reads goes from under it; ``record`` holds ``lock`` for the other threads.
 """
 
 from __future__ import annotations
@@ -21,8 +28,8 @@ import threading
 import zlib
 from array import array
 from bisect import bisect_left
-from collections.abc import Iterable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any, Final
+from collections.abc import Iterable, Iterator, MutableSequence, Sequence
+from typing import TYPE_CHECKING, Any, Final, Generic, TypeVar, overload
 
 import orjson
 
@@ -34,11 +41,13 @@ if TYPE_CHECKING:
     from ..session.batches import RecordSequence
 
 BLOCK: Final = 256  # records per compressed block
+LIVE_KEEP: Final = 1_000_000  # records a live session keeps (about 600 MB at most)
 MAX_FLAG_BITS: Final = 63  # bit 63 collects codes beyond the first 63 seen
 SUMMARY_INTERN_LIMIT: Final = 200_000  # distinct summaries shared before the table restarts
 NONE_DEVICE: Final = -1
 NONE_SEQ: Final = -1
 NAN: Final = float("nan")
+T = TypeVar("T")
 
 # severity of a record: what its colour says
 OK: Final = 0
@@ -53,6 +62,48 @@ DIRECTION_NAMES: Final = (None, REQUEST, RESPONSE)
 def _filled(values: Sequence[Any], none: Any) -> Sequence[Any]:
     """``values`` with None replaced by ``none`` (the column's marker for "no value")."""
     return values if None not in values else [none if v is None else v for v in values]
+
+
+class Column(Generic[T]):
+    """One column, indexed by record index: the values of the records dropped from its start
+    are gone, the others keep their index (a negative index counts from the end)."""
+
+    __slots__ = ("base", "data")
+
+    def __init__(self, data: MutableSequence[T]) -> None:
+        self.data = data
+        self.base = 0  # the index of data[0]
+
+    @overload
+    def __getitem__(self, i: int) -> T: ...
+    @overload
+    def __getitem__(self, i: slice) -> MutableSequence[T]: ...
+    def __getitem__(self, i: int | slice) -> T | MutableSequence[T]:
+        base = self.base
+        if isinstance(i, slice):  # of records kept (the filter's start is never below base)
+            start = None if i.start is None else max(i.start - base, 0)
+            stop = None if i.stop is None else max(i.stop - base, 0)
+            return self.data[start:stop]
+        if i < 0:
+            return self.data[i]
+        if i < base:
+            raise IndexError(f"record {i} was dropped (the oldest kept is {base})")
+        return self.data[i - base]
+
+    def __len__(self) -> int:
+        return self.base + len(self.data)
+
+    def extend(self, values: Iterable[T]) -> None:
+        self.data.extend(values)
+
+    def index(self, value: T, start: int, stop: int) -> int:
+        base = self.base
+        return base + self.data.index(value, max(start - base, 0), max(stop - base, 0))
+
+    def drop(self, n: int) -> None:
+        """Drop the first ``n`` values kept."""
+        del self.data[:n]
+        self.base += n
 
 
 class Interner:
@@ -114,24 +165,27 @@ class FlagBits:
 
 
 class RecordStore:
-    """Every record of a session, compact; see the module doc."""
+    """The records of a session (the newest ``keep`` of them; None: every one), compact; see
+    the module doc."""
 
-    def __init__(self) -> None:
-        self.lock = threading.Lock()
+    def __init__(self, keep: int | None = None) -> None:
+        self.keep = keep
+        self.lock = threading.RLock()
+        self.first = 0  # the oldest record kept (the ones before it were dropped)
         self.count = 0  # records readable (columns are complete below it)
-        self.t = array("d")  # NaN: no time
-        self.seq = array("q")
-        self.bus = array("H")
-        self.device = array("i")  # NONE_DEVICE: none
-        self.direction = array("b")  # DIRECTIONS
-        self.name = array("I")  # manual name, or protocol / kind when a frame has none
-        self.protocol = array("B")
-        self.kind = array("B")
-        self.flags = array("Q")
-        self.severity = array("B")
-        self.latency = array("d")  # NaN: none
-        self.pair = array("q")  # NONE_SEQ: none
-        self.summary: list[str] = []
+        self.t = Column(array("d"))  # NaN: no time
+        self.seq = Column(array("q"))
+        self.bus = Column(array("H"))
+        self.device = Column(array("i"))  # NONE_DEVICE: none
+        self.direction = Column(array("b"))  # DIRECTIONS
+        self.name = Column(array("I"))  # manual name, or protocol / kind when a frame has none
+        self.protocol = Column(array("B"))
+        self.kind = Column(array("B"))
+        self.flags = Column(array("Q"))
+        self.severity = Column(array("B"))
+        self.latency = Column(array("d"))  # NaN: none
+        self.pair = Column(array("q"))  # NONE_SEQ: none
+        self.summary: Column[str] = Column([])
         self.buses = Interner()
         self.names = Interner()
         self.protocols = Interner()
@@ -141,12 +195,18 @@ class RecordStore:
         self.t_last: float | None = None  # the latest time seen
         self._summaries: dict[str, str] = {}
         self._blocks: list[bytes] = []
+        self._blocks_first = 0  # the block number of _blocks[0]
         self._open: list[tuple[Any, ...]] = []  # the details of the block being filled
         self._cache: dict[int, list[Any]] = {}  # a few decompressed, parsed blocks
         self._seq_sorted = True
 
     def __len__(self) -> int:
         return self.count
+
+    @property
+    def kept(self) -> int:
+        """How many records the store holds."""
+        return self.count - self.first
 
     # -- writing (one thread) --------------------------------------------------------------
 
@@ -209,7 +269,8 @@ class RecordStore:
             strict=True,
         )
         self._add_details(list(details))
-        self.count = len(self.seq)
+        with self.lock:  # not in the middle of a trim
+            self.count = len(self.seq)
 
     def _add_details(self, details: list[tuple[Any, ...]]) -> None:
         while details:
@@ -222,10 +283,35 @@ class RecordStore:
                     self._blocks.append(packed)
                     self._open = []
 
+    def trim(self, below: int | None = None) -> int:
+        """Drop the oldest records beyond ``keep`` (whole blocks, once the store holds a tenth
+        more), none from ``below`` on (what the reader has not seen yet); how many were
+        dropped. Only on the thread that reads the columns."""
+        if self.keep is None or self.kept <= self.keep + max(BLOCK, self.keep // 10):
+            return 0
+        with self.lock:
+            end = self.count - self.keep if below is None else min(self.count - self.keep, below)
+            blocks = max(end // BLOCK - self._blocks_first, 0)
+            n = blocks * BLOCK
+            for column in self._columns():
+                column.drop(n)
+            del self._blocks[:blocks]
+            self._blocks_first += blocks
+            self._cache.clear()
+            self.first += n
+        return n
+
+    def _columns(self) -> list[Column[Any]]:
+        return [value for value in vars(self).values() if isinstance(value, Column)]
+
     # -- reading (any thread) --------------------------------------------------------------
 
     def record(self, i: int) -> Record:
-        """The whole record at index ``i``, as it was decoded."""
+        """The whole record at index ``i``, as it was decoded (IndexError: not kept)."""
+        with self.lock:  # another thread's read is not cut by a trim
+            return self._record(i)
+
+    def _record(self, i: int) -> Record:
         fields, errors, warnings, flags, raw, code, offset, index, length = self._detail(i)
         data = bytes.fromhex(raw)
         return Record(
@@ -259,14 +345,15 @@ class RecordStore:
         return None if name == fallback else name
 
     def _detail(self, i: int) -> list[Any]:
-        if not 0 <= i < self.count:
+        if not self.first <= i < self.count:
             raise IndexError(i)
         block, pos = divmod(i, BLOCK)
         with self.lock:
-            if block < len(self._blocks):
+            if block - self._blocks_first < len(self._blocks):
                 details = self._cache.get(block)
                 if details is None:
-                    details = orjson.loads(zlib.decompress(self._blocks[block]))
+                    packed = self._blocks[block - self._blocks_first]
+                    details = orjson.loads(zlib.decompress(packed))
                     if len(self._cache) >= 8:
                         self._cache.pop(next(iter(self._cache)))
                     self._cache[block] = details
@@ -278,17 +365,22 @@ class RecordStore:
         return found
 
     def records(self, indices: Iterable[int]) -> Iterator[Record]:
+        """The records at ``indices`` that are still kept (an export that runs while a live
+        store drops its oldest writes what is left of them)."""
         for i in indices:
-            yield self.record(i)
+            try:
+                yield self.record(i)
+            except IndexError:
+                continue
 
     def index_of_seq(self, seq: int) -> int | None:
-        """The index of the record numbered ``seq``, if stored."""
-        n = self.count
+        """The index of the record numbered ``seq``, if kept."""
+        first, n = self.first, self.count
         if self._seq_sorted:
-            i = bisect_left(self.seq, seq, 0, n)
+            i = bisect_left(self.seq, seq, first, n)
             return i if i < n and self.seq[i] == seq else None
         try:
-            return self.seq.index(seq, 0, n)  # records of several buses: in time order
+            return self.seq.index(seq, first, n)  # records of several buses: in time order
         except ValueError:
             return None
 
@@ -318,11 +410,11 @@ class RecordStore:
         return self.flag_bits.codes(self.flags[i])
 
     def first_index_at_or_after(self, t: float) -> int | None:
-        """The first record at or after time ``t`` (records without a time are skipped)."""
-        column, n = self.t, self.count
-        for i in range(n):
-            if column[i] >= t:
-                return i
+        """The first record kept at or after time ``t`` (records without a time are skipped)."""
+        column = self.t
+        for k, value in enumerate(column[self.first : self.count]):
+            if value >= t:
+                return self.first + k
         return None
 
 

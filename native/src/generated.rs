@@ -1420,6 +1420,12 @@ pub mod messages {
     pub const GARBAGE_NO_FRAME: &str = "no frame starts here";
     pub const GARBAGE_INCOMPLETE: &str = "incomplete frame followed by a valid one";
     pub const GARBAGE_BAD_CHECKSUM: &str = "bytes of a frame-shaped candidate with a bad checksum";
+
+    // a capture file's damage: a compressed file cut short or damaged
+    pub const CAPTURE_GZIP_CUT: &str = "the compressed file is cut short";
+    pub const CAPTURE_GZIP_DAMAGED: &str = "the compressed data is damaged";
+    pub const CAPTURE_NOT_GZIP: &str = "not gzip data, though its name ends in .gz";
+    pub const CAPTURE_REST_LOST: &str = "the rest is lost";
 }
 
 /// analyzer/cycles/ (commands.py, model.py, rules.py, listener.py): kinds, fates, words.

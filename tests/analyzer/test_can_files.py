@@ -336,7 +336,7 @@ def test_candump_gzip_and_cut_gzip(tmp_path: Path) -> None:
     frames, reader = read_all(cut)
     assert 0 < len(frames) < 20000
     assert [f.data[0] for f in frames] == [i % 256 for i in range(len(frames))]
-    assert reader.errors and "read error" in reader.errors[-1]
+    assert reader.errors[-1].endswith(": the compressed file is cut short; the rest is lost")
 
 
 def test_candump_tell_moves(tmp_path: Path) -> None:

@@ -11,10 +11,12 @@ import signal
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 
 import pytest
 from cli_process import ENV, eg2scope
+from native_core import require_native
 from recording.mcap_checks import assert_time_ordered
 
 from decoders import build as b
@@ -259,8 +261,8 @@ def _bad_deflate_block(data: bytes) -> bytes:
 @pytest.mark.parametrize(
     ("name", "payload", "message"),
     [
-        ("dump.bin.gz", b.serial_frame(1, 0x41) * 500, "compressed data damaged or cut short"),
-        ("bus.log.gz", b"(1.000000) can0 01180001#08\n" * 500, "line 1: read error:"),
+        ("dump.bin.gz", b.serial_frame(1, 0x41) * 500, "the compressed data is damaged after 0"),
+        ("bus.log.gz", b"(1.000000) can0 01180001#08\n" * 500, "line 1: the compressed data is"),
     ],
     ids=["raw-dump", "candump"],
 )
@@ -273,3 +275,79 @@ def test_a_bad_deflate_block_is_damage_not_a_traceback(
     assert res.returncode == 3, res.stderr
     assert message in res.stderr and "invalid block type" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+ENGINES = ["python", "native"]
+
+
+def _decode(path: Path, engine: str, *args: str) -> subprocess.CompletedProcess[str]:
+    if engine == "native":
+        require_native()  # skips without a Rust toolchain, fails with one
+    return eg2scope("decode", str(path), "--engine", engine, *args)
+
+
+def _damage_lines(stderr: str, path: Path) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith(f"eg2scope: {path}:")]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("name", ["can.log.gz", "dump.bin.gz"])
+def test_a_cut_gz_capture_says_so_in_one_line_and_keeps_what_came_before(
+    tmp_path: Path, engine: str, name: str
+) -> None:
+    """A .gz cut short: one line in words ("the compressed file is cut short"; no EOFError, no
+    second line for the line the cut went through), exit 3, every frame before the cut."""
+    source = "can_pick_place.log" if name.startswith("can") else "serial_session.bin"
+    packed = gzip.compress((CAPTURES / source).read_bytes())
+    path = tmp_path / name
+    path.write_bytes(packed[: len(packed) * 2 // 3])
+    args = ["-p", "serial"] if name.startswith("dump") else []
+    res = _decode(path, engine, "-f", "jsonl", *args)
+    assert res.returncode == 3, res.stderr
+    said = _damage_lines(res.stderr, path)
+    assert len(said) == 1 and "EOFError" not in res.stderr, res.stderr
+    assert said[0].endswith("the compressed file is cut short; the rest is lost") or (
+        "the compressed file is cut short after " in said[0]
+    ), said
+    whole = zlib.decompressobj(wbits=31).decompress(path.read_bytes())
+    records = [json.loads(line) for line in res.stdout.splitlines()]
+    if name.startswith("can"):  # one frame a line: every whole line before the cut
+        lines = whole.count(b"\n")
+        assert len(records) == lines > 0
+        assert said[0].startswith(f"eg2scope: {path}: line {lines + 1}: ")
+    else:  # every byte recovered is in a record
+        assert sum(r["length"] for r in records) == len(whole) > 0
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("name", ["trace.asc.gz", "bus.log.gz"])
+def test_a_gz_name_on_data_that_is_no_gzip_says_so_in_words(
+    tmp_path: Path, engine: str, name: str
+) -> None:
+    path = tmp_path / name
+    path.write_bytes(b"this is not gzip at all\n" * 20)
+    res = _decode(path, engine)
+    assert res.returncode == 3, res.stderr
+    said = _damage_lines(res.stderr, path)
+    assert len(said) == 1 and said[0].endswith("not gzip data, though its name ends in .gz")
+    assert "BadGzipFile" not in res.stderr and "gzip." not in res.stderr
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_bytes_that_are_no_text_are_quoted_escaped(tmp_path: Path, engine: str) -> None:
+    """A line of undecodable bytes is quoted as ``\\xff``, never as stand-in characters: in a
+    bad line and in "does not look like a candump log"."""
+    bad = tmp_path / "bad.log"
+    bad.write_bytes(b"(1.000000) can0 123#00\n\xff\xfe\x80 junk \xc3( line\n")
+    res = _decode(bad, engine)
+    assert res.returncode == 3
+    assert _damage_lines(res.stderr, bad) == [
+        f"eg2scope: {bad}: line 2: cannot parse: '\\xff\\xfe\\x80 junk \\xc3( line' "
+        "(not a candump frame)"
+    ]
+    junk = tmp_path / "junk.log"
+    junk.write_bytes(b"\xff\xfe one\n" + b"\xe9t\xe9\n" * 6)
+    res = _decode(junk, engine)
+    assert res.returncode == 3 and "\ufffd" not in res.stderr
+    assert "does not look like a candump log" in res.stderr
+    assert "(the first is '\\xff\\xfe one')" in res.stderr

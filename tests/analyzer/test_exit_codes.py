@@ -344,6 +344,33 @@ def test_a_file_job_interrupted_is_130(
     assert err.strip().splitlines()[-1] == "eg2scope: interrupted" and "Traceback" not in err
 
 
+def wait_for_a_child(proc: subprocess.Popen[str]) -> None:
+    """Until the process has forked its first child (spun on: the window is milliseconds)."""
+    children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        if children.read_text().split():
+            return
+    pytest.fail("no worker process was started")
+
+
+@pytest.mark.parametrize("sig", SIGNALS)
+def test_a_signal_while_the_parts_workers_start_is_130_without_a_traceback(
+    tmp_path: Path, big_dump: Path, sig: str
+) -> None:
+    """The signal comes as the pool forks its workers: no worker prints a KeyboardInterrupt
+    (it ran the parent's handler before its own setup), and the parent does not lose the
+    interrupt inside a fork hook ("Exception ignored", then exit 0)."""
+    for _ in range(5):
+        out = tmp_path / "out.jsonl"
+        argv = ["--engine", "python", "-j", "4", "-o", str(out), "-f", "jsonl"]
+        proc = start("decode", str(big_dump), *argv)
+        wait_for_a_child(proc)
+        _, err = stop_with(proc, sig)
+        assert proc.returncode == 130, err
+        assert "Traceback" not in err and "Exception ignored" not in err, err
+
+
 def test_batch_interrupted_is_130(tmp_path: Path, big_dump: Path) -> None:
     proc = start("batch", str(big_dump), "-o", str(tmp_path / "fleet"), "--workers", "1")
     wait_reading(proc, big_dump, 1 << 20)

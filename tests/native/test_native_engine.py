@@ -231,6 +231,6 @@ def test_a_file_name_that_is_not_utf8_goes_to_python(tmp_path: Path) -> None:
     code, _, err = run("decode", str(tmp_path / name), "-o", str(tmp_path / "o"))
     assert (
         code == 3
-        and "\\udcffcut.bin.gz: compressed data damaged"
+        and "\\udcffcut.bin.gz: the compressed file is cut short"
         in err.encode("utf-8", "backslashreplace").decode()
     )

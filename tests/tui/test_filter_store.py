@@ -13,7 +13,7 @@ from analyzer.tui.aggregates import HISTOGRAM_BINS, Aggregates, latency_stats
 from analyzer.tui.export import raw_item
 from analyzer.tui.filter import FilterError, parse
 from analyzer.tui.spans import span_at, spans
-from analyzer.tui.store import RecordStore
+from analyzer.tui.store import BLOCK, RecordStore
 from decoders.model import Record
 
 
@@ -52,6 +52,48 @@ def test_store_gives_back_every_record_as_decoded(records: list[Record], store: 
     assert store.count == len(records)
     for i, rec in enumerate(records):
         assert store.record(i).to_dict() == rec.to_dict()
+
+
+def test_a_store_that_keeps_the_newest_drops_the_oldest_and_the_rest_keep_their_index(
+    records: list[Record],
+) -> None:
+    """``keep``: the oldest whole blocks go once a tenth more is held (never what the reader
+    has not seen); every record kept reads back as decoded at its own index, the filter and
+    the look-ups see only what is kept."""
+    many = list(records) * 40  # a long session
+    keep = 600
+    store = RecordStore(keep)
+    seen = dropped = 0
+    for k in range(0, len(many), 50):
+        store.append(RecordSequence(many[k : k + 50]))
+        dropped += store.trim(below=seen)  # as the frame list does, at each update
+        seen = store.count
+        assert keep <= store.kept <= keep + 2 * BLOCK + 50 or store.first == 0
+    assert dropped == store.first > max(len(many) - keep - 2 * BLOCK - 50, 0)
+    assert store.first % BLOCK == 0 and store.count == len(many)
+    for i in range(store.first, store.count):
+        assert store.record(i).to_dict() == many[i].to_dict()
+    with pytest.raises(IndexError):
+        store.record(store.first - 1)
+    with pytest.raises(IndexError):
+        store.t[store.first - 1]
+    assert [r.seq for r in store.records([0, store.first, store.count - 1])] == [
+        many[store.first].seq,
+        many[-1].seq,
+    ]  # an export that runs on: what is left of the records it was asked for
+    compiled = parse("dev == 1 and request")
+    assert compiled is not None
+    want = [
+        i
+        for i in range(store.first, len(many))
+        if many[i].device == 1 and many[i].direction == "request"
+    ]
+    assert compiled.indices(store, 0) == want
+    for seq in (many[0].seq, many[-1].seq):  # the copies kept: the first of them is found
+        kept = [i for i in range(store.first, store.count) if many[i].seq == seq]
+        assert store.index_of_seq(seq) == kept[0]
+    at = store.first_index_at_or_after(-1e18)
+    assert at is not None and at >= store.first
 
 
 FILTERS = [

@@ -30,6 +30,7 @@ from analyzer.tui.notes import Notes
 from analyzer.tui.replay import ReplaySource
 from analyzer.tui.rows import ELLIPSIS, MARKERS, cut_at, plain_row
 from analyzer.tui.screens import HelpScreen
+from analyzer.tui.store import LIVE_KEEP
 from analyzer.tui.widgets.detail import DetailTree
 from analyzer.tui.widgets.devices import DevicePanel
 from analyzer.tui.widgets.event_log import EMPTY as EVENTS_EMPTY
@@ -82,6 +83,19 @@ def test_the_protocol_names_of_the_command_line_reach_the_session_converted() ->
     for argv in ((), ("--protocol", "auto"), ("--protocol", "serial"), ("-p", "rs232")):
         app = capture_app(CAPTURES / "serial_session.bin", *argv)
         assert app.session.options.protocol in (None, "eg2-serial")
+
+
+def test_keep_bounds_a_live_session_and_a_capture_keeps_everything_unless_told() -> None:
+    capture = str(CAPTURES / "serial_session.bin")
+    assert tui_opts("--demo").keep == LIVE_KEEP
+    assert tui_opts(capture).keep is None
+    assert tui_opts("--demo", "--keep", "all").keep is None
+    assert tui_opts(capture, "--keep", "5000").keep == 5000
+    assert capture_app(CAPTURES / "serial_session.bin", "--keep", "300").store.keep == 300
+    for bad in ("0", "-3", "many"):
+        with pytest.raises(SystemExit) as exc:
+            tui_opts("--demo", "--keep", bad)
+        assert exc.value.code == 2
 
 
 def test_an_exception_in_the_app_stops_the_session_and_exits_non_zero(capsys) -> None:

@@ -90,6 +90,54 @@ def test_filter_narrows_the_list_and_p_jumps_to_the_pair() -> None:
     asyncio.run(scenario())
 
 
+def test_a_live_session_keeps_the_newest_records_and_the_list_still_works() -> None:
+    """``--keep 1000``: the oldest go as the session runs on, the status says so, the rows
+    left keep their index; Home, the detail pane, the filter and p work on what is kept, and
+    a frame no longer kept is said so."""
+
+    async def scenario() -> None:
+        with DemoRig(noise=0.0) as rig:
+            app = demo_app(rig, argv=("--keep", "1000"))
+            async with driving(app) as pilot:
+                frames, store = app.frames, app.store
+                await until(pilot, lambda: frames.first > 0, timeout=30)
+                assert store.keep == 1000 and frames.first == store.first
+                assert 1000 <= frames.row_count == frames.known - frames.first < 1600
+                assert "keeping the last 1,000" in app.status_text()
+                await pilot.press("home")
+                assert frames.selected == frames.first and not frames.follow
+                shown = frames.selected
+                app._show_detail(shown)  # the detail pane of the oldest kept
+                assert frames.render_line(0).text.strip()
+                await until(pilot, lambda: store.first > shown, timeout=30)
+                await pilot.pause(0.3)
+                assert frames.selected == frames.first  # its record gone: the oldest kept
+                app.go_to_index(0)
+                await pilot.pause()
+                assert any("no longer kept" in n.message for n in app._notifications)
+                app.query_one("#filter").value = "dev == 1 and bus == can0"
+                app.action_filter()
+                await pilot.press("enter")
+                first = frames.first
+                await until(pilot, lambda: frames.first > first, timeout=30)
+                view = [frames.index_at(p) for p in range(frames.row_count)]
+                assert view and min(view) >= frames.first
+                assert all(store.device_of(i) == 1 and store.bus_of(i) == "can0" for i in view)
+                assert f"of {frames.known - frames.first:,} shown" in app.status_text()
+                response = next(
+                    i
+                    for i in reversed(view)
+                    if store.pair_of(i) is not None and store.direction[i] == 2
+                )
+                frames.jump_to_index(response)
+                await pilot.press("p")
+                assert frames.selected is not None and store.direction[frames.selected] == 1
+                await pilot.press("q")
+        assert app.return_code == 0
+
+    asyncio.run(scenario())
+
+
 def test_bad_checksum_is_red_in_the_list_and_in_the_problems_panel_and_trigger_freezes() -> None:
     async def scenario() -> None:
         with DemoRig(noise=0.3) as rig:

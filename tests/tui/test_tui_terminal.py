@@ -5,10 +5,17 @@ recording (or ``--rerun`` file) is complete. Every kind of input at 80x24 and 20
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
+import pty
 import re
+import select
 import signal
+import struct
+import subprocess
 import sys
+import termios
 import time
 from pathlib import Path
 
@@ -28,7 +35,9 @@ ROW = re.compile(r"^.\s*(?:\d+\s+)?(-|#\d+|[\d.]+)\s+(\S+)\s+([→←·])\s+(ID 
 
 
 class Terminal:
-    def __init__(self, argv: list[str], size: tuple[int, int] = (COLUMNS, LINES)) -> None:
+    def __init__(
+        self, argv: list[str], size: tuple[int, int] = (COLUMNS, LINES), **env: str
+    ) -> None:
         columns, lines = size
         self.screen = pyte.Screen(columns, lines)
         self.stream = pyte.ByteStream(self.screen)
@@ -38,7 +47,12 @@ class Terminal:
             argv[1:],
             cwd=str(ROOT),
             dimensions=(lines, columns),
-            env={"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "TEXTUAL_ANIMATIONS": "none"},
+            env={
+                "TERM": "xterm-256color",
+                "PATH": "/usr/bin:/bin",
+                "TEXTUAL_ANIMATIONS": "none",
+                **env,
+            },
         )
 
     def read(self) -> None:
@@ -352,3 +366,101 @@ def test_without_a_terminal_the_engine_usage_error_comes_first() -> None:
     assert "--engine native" in done.stderr and "needs a terminal" not in done.stderr
     done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"))
     assert done.returncode == 2 and "needs a terminal" in done.stderr
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_signal_ends_the_live_tui_at_once(tmp_path: Path, sig: signal.Signals) -> None:
+    """``systemctl stop``, ``kill``, the terminal's SIGHUP: the live session is stopped (0),
+    within seconds, its recording finished."""
+    out = tmp_path / "run.mcap"
+    term = Terminal(tui("--demo", "-o", str(out)), SIZES["80x24"])
+    try:
+        term.wait_for("rs485")
+        term.child.kill(sig)
+        status = finished(term, timeout=10)
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+    assert "records decoded" in term.after()
+    with McapCaptureReader(out) as reader:
+        assert list(reader) and not reader.damaged
+
+
+def test_keep_says_the_oldest_go_in_a_real_terminal() -> None:
+    term = Terminal(tui("--demo", "--keep", "1000"), SIZES["200x50"])
+    try:
+        term.wait_for("keeping the last 1,000", timeout=60)
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+
+
+def test_no_color_runs_the_tui_in_monochrome() -> None:
+    """NO_COLOR=1: Textual's monochrome filter reads every segment's style; a row padded with
+    no style crashed the app at its first short row."""
+    term = Terminal(tui("--demo"), SIZES["80x24"], NO_COLOR="1")
+    try:
+        term.wait_for("rs485")
+        time.sleep(2.0)
+        status = term.quit()
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert status == 0, term.after()
+    assert b"Traceback" not in term.raw and b"AttributeError" not in term.raw
+
+
+def test_the_live_tui_ends_when_its_terminal_goes() -> None:
+    """The pty's master closed (the window, the ssh connection, the script driving it gone):
+    the kernel hangs the terminal up (SIGHUP to its session): the app ends, 0, at once."""
+    term = Terminal(tui("--demo"), SIZES["80x24"])
+    try:
+        term.wait_for("rs485")
+        term.child.ptyproc.fileobj.close()  # the master: nothing else holds it
+        end = time.monotonic() + 10
+        while term.child.isalive() and time.monotonic() < end:
+            time.sleep(0.1)
+        assert not term.child.isalive(), "still running 10 s after its terminal went"
+    finally:
+        if term.child.isalive():
+            term.child.terminate(force=True)
+    assert term.child.exitstatus == 0
+
+
+@pytest.mark.parametrize(("kind", "want"), [("live", 0), ("replay", 130)])
+def test_a_tui_on_a_terminal_that_hangs_up_without_a_signal_ends(
+    inputs: dict[str, Path], kind: str, want: int
+) -> None:
+    """A terminal that is not the process's controlling one sends no SIGHUP when it goes: the
+    app sees the hang-up itself and ends (live 0; a replay cut short 130), where Textual alone
+    read the ended input in a busy loop and its writes then waited forever (SIGTERM too)."""
+    argv = ["--demo"] if kind == "live" else [str(inputs["demo recording"]), "--speed", "1"]
+    ready = "ID 1" if kind == "live" else "replay playing"
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
+    env = {"TERM": "xterm-256color", "PATH": "/usr/bin:/bin", "TEXTUAL_ANIMATIONS": "none"}
+    proc = subprocess.Popen(
+        tui(*argv), cwd=ROOT, env=env, stdin=slave, stdout=slave, stderr=slave,
+        start_new_session=True,  # a session of its own, without a controlling terminal
+    )  # fmt: skip
+    os.close(slave)
+    try:
+        screen = pyte.Screen(80, 24)
+        stream = pyte.ByteStream(screen)
+        end = time.monotonic() + 30
+        while ready not in "\n".join(screen.display) and time.monotonic() < end:
+            if select.select([master], [], [], 0.1)[0]:
+                stream.feed(os.read(master, 65536))
+        assert ready in "\n".join(screen.display), "\n".join(screen.display)
+        os.close(master)
+        master = -1
+        assert proc.wait(timeout=10) == want
+    finally:
+        if master >= 0:
+            os.close(master)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

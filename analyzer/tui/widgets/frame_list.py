@@ -7,6 +7,9 @@ list's width (``layout.row_layout``): nothing to scroll sideways, and what is cu
 
 Follow: while following, the cursor sits on the newest shown record; moving the cursor or
 scrolling up stops following (the capture goes on), ``End``/``G`` resumes.
+
+A store that keeps only the newest records (a live session) drops the oldest as the list
+takes new ones in: the rows left keep their place under the cursor and on the screen.
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ from ..layout import RowLayout, row_layout
 from ..messages import RowSelected
 from ..rows import MARKER_EVIDENCE, STYLE_MATCH, TimeMode, render_row
 from ..store import OK, RecordStore
+
+NO_STYLE = Style()  # padding: as no style, but one a filter can read
 
 
 class FrameList(ScrollView, can_focus=True):
@@ -56,6 +61,7 @@ class FrameList(ScrollView, can_focus=True):
         super().__init__(**kwargs)
         self.store = store
         self.known = 0  # store records the list has taken in
+        self.first = 0  # the oldest of them the store still keeps
         self.view: array[int] | None = None  # shown store indices; None: all
         self.filter: CompiledFilter | None = None
         self.cursor = -1  # position in the shown rows
@@ -74,22 +80,22 @@ class FrameList(ScrollView, can_focus=True):
 
     @property
     def row_count(self) -> int:
-        return len(self.view) if self.view is not None else self.known
+        return len(self.view) if self.view is not None else self.known - self.first
 
     def index_at(self, position: int) -> int:
         """The store index of shown row ``position``."""
-        return self.view[position] if self.view is not None else position
+        return self.view[position] if self.view is not None else self.first + position
 
     def position_of(self, index: int) -> int | None:
-        """The shown row of store index ``index`` (None: filtered out)."""
+        """The shown row of store index ``index`` (None: filtered out, or no longer kept)."""
         if self.view is None:
-            return index if 0 <= index < self.known else None
+            return index - self.first if self.first <= index < self.known else None
         pos = bisect_left(self.view, index)
         return pos if pos < len(self.view) and self.view[pos] == index else None
 
     def nearest_position(self, index: int) -> int:
         if self.view is None:
-            return min(max(index, 0), self.known - 1)
+            return min(max(index - self.first, 0), self.row_count - 1)
         return min(bisect_left(self.view, index), len(self.view) - 1)
 
     @property
@@ -102,7 +108,9 @@ class FrameList(ScrollView, can_focus=True):
     # -- new records, filters ---------------------------------------------------------------
 
     def take_new(self, count: int) -> None:
-        """The store now holds ``count`` records: show the new ones."""
+        """The store now holds ``count`` records: show the new ones (and forget the oldest,
+        if the store drops them)."""
+        self._forget(self.store.trim(below=self.known))  # every record is shown once
         old = self.known
         if count <= old:
             return
@@ -119,11 +127,31 @@ class FrameList(ScrollView, can_focus=True):
         if self.time_mode is TimeMode.DELTA:
             self.refresh()
 
+    def _forget(self, dropped: int) -> None:
+        """The store dropped its ``dropped`` oldest records."""
+        if not dropped:
+            return
+        first = self.first = self.store.first
+        gone = dropped  # rows the list showed
+        if self.view is not None:
+            gone = bisect_left(self.view, first)
+            del self.view[:gone]
+        if self.reference is not None and self.reference < first:
+            self.reference = None
+        self._cache.clear()
+        self.cursor = max(self.cursor - gone, 0 if self.row_count else -1)
+        self._resize()
+        y = max(self.scroll_offset.y - gone, 0)
+        self.scroll_to(y=y, animate=False, immediate=True, force=True)
+        self._announce()
+
     def set_filter(self, compiled: CompiledFilter | None) -> None:
         keep = self.selected
         self.filter = compiled
         self.view = (
-            None if compiled is None else array("q", compiled.indices(self.store, 0, self.known))
+            None
+            if compiled is None
+            else array("q", compiled.indices(self.store, self.first, self.known))
         )
         self._cache.clear()
         self._resize()
@@ -283,7 +311,9 @@ class FrameList(ScrollView, can_focus=True):
         if strip is None:
             strip = self._render_row(index, previous, is_cursor)
             self._cache[key] = strip
-        return strip.crop_extend(scroll_x, scroll_x + width, None)
+        # padded with an empty style, not None: a segment without one fails Textual's
+        # monochrome filter (NO_COLOR=1), which crashed the app at its first short row
+        return strip.crop_extend(scroll_x, scroll_x + width, NO_STYLE)
 
     def _render_row(self, index: int, previous: int | None, is_cursor: bool) -> Strip:
         store = self.store
@@ -309,5 +339,5 @@ class FrameList(ScrollView, can_focus=True):
             text.stylize(cursor)
         line = text.render(self.app.console)
         return Strip(list(line), text.cell_len).extend_cell_length(
-            self._layout.width, cursor if is_cursor else None
+            self._layout.width, cursor if is_cursor else NO_STYLE
         )

@@ -17,13 +17,15 @@
 //! - a cut or damaged .gz yields what Python's gzip module yields before raising: every whole
 //!   line before the damage (LF files), whole 1 MiB blocks (CR files), nothing at all when the
 //!   damage is inside the line that crosses the first 64 KiB, and the whole head when the
-//!   damage is inside the first 64 KiB; then `line N: read error: Type: message`;
+//!   damage is inside the first 64 KiB (but the line the damage cuts: it is part of it);
+//!   then one error in words (compressed.rs), or `line N: read error: Type: message`;
 //! - -tA dates go through the C library's `mktime`, as Python's `time.mktime` does (on Unix;
 //!   elsewhere `DecodeRun::open` leaves such logs to the Python engine).
 //!
 //! The gzip container is read here (header, CRC and size checks, members, zero padding, in
 //! Python's order and words); the deflate data through flate2. A corrupt deflate stream
-//! (zlib.error) is damage like a cut file: `line N: read error: error: Error -3 ...`.
+//! (zlib.error) is damage like a cut file: `line N: the compressed data is damaged (Error -3
+//! ...); the rest is lost`.
 
 use std::borrow::Cow;
 use std::fs::File;
@@ -32,6 +34,7 @@ use std::path::{Path, PathBuf};
 
 use flate2::{Crc, Decompress, FlushDecompress, Status};
 
+use super::compressed::compression_damage;
 use crate::decoders::model::CanFrame;
 
 /// errors listed per file; `bad_lines` counts them all
@@ -311,10 +314,37 @@ fn all_hex(s: &[u8]) -> bool {
 /// candump.py `quote(line, limit)`: the line for an error text, stripped, cut at `limit`
 /// characters, repr'd.
 fn quote(line: &[u8], limit: usize) -> String {
-    let text = ascii_replace(line);
-    // str.strip(): Unicode whitespace; in ASCII that is bytes' whitespace and \x1c-\x1f
+    let text: String = line.iter().map(|&b| b as char).collect(); // latin-1
+                                                                  // candump.py `STRIPPED`: what str.strip takes of ASCII
     let text = text.trim_matches(|c: char| matches!(c, '\t'..='\r' | '\x1c'..='\x1f' | ' '));
-    str_repr(&cut_chars(text, limit))
+    str_ascii(&cut_chars(text, limit))
+}
+
+/// `ascii(str)` of a latin-1 string: as `repr`, with every character past ASCII as `\xNN`.
+fn str_ascii(s: &str) -> String {
+    let quote = if s.contains('\'') && !s.contains('"') {
+        '"'
+    } else {
+        '\''
+    };
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push(quote);
+    for c in s.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '\t' => out.push_str("\\t"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            _ if c == quote => {
+                out.push('\\');
+                out.push(quote);
+            }
+            ' '..='~' => out.push(c),
+            _ => out.push_str(&format!("\\x{:02x}", c as u32)),
+        }
+    }
+    out.push(quote);
+    out
 }
 
 /// `text` cut at `limit` characters, the last three of them "..." (as the Python cuts).
@@ -723,6 +753,8 @@ impl Lines {
                 }
             }
         } else if head_error.is_some() || lines.start == lines.end {
+            // the line the damage cut is part of it: said once, with it
+            lines.yield_partial = head_error.is_none();
             lines.exhausted = true;
             lines.error = head_error;
         } else if lines.buf[lines.end - 1] != b'\n' {
@@ -968,7 +1000,12 @@ impl CandumpReader {
                 }
                 Err(e) => {
                     self.framed();
-                    let text = format!("line {}: read error: {}", self.lineno + 1, e.text);
+                    let (kind, message) = e.text.split_once(": ").unwrap_or((&e.text, ""));
+                    let at_start = self.lineno == 0;
+                    let text = match compression_damage(kind, message, at_start, "") {
+                        Some(words) => format!("line {}: {words}", self.lineno + 1),
+                        None => format!("line {}: read error: {}", self.lineno + 1, e.text),
+                    };
                     push_error(&mut self.errors, text, self.max_errors);
                     self.lines = None;
                     return false;
@@ -1576,6 +1613,10 @@ mod tests {
         assert_eq!(bytes_repr(b"\xff\x00\\"), "b'\\xff\\x00\\\\'");
         assert_eq!(quote(b"  ab\x1c\n", MAX_QUOTED), "'ab'");
         assert_eq!(quote(b"abcdef", 5), "'ab...'");
+        assert_eq!(
+            quote(b"\xff\x80 a'b\xc3(\n", 80),
+            "\"\\xff\\x80 a'b\\xc3(\""
+        );
         assert_eq!(can_bus_name(Some("1")), "can1");
         assert_eq!(can_bus_name(Some("")), "can0");
     }
@@ -1704,17 +1745,22 @@ mod tests {
         assert_eq!(read_all("ok.log.gz", &gz), (2000, vec![]));
         let (n, errors) = read_all("cut.log.gz", &gz[..gz.len() - 9]);
         assert_eq!(n, 2000);
-        assert_eq!(errors, [format!("line 2001: read error: {GZIP_EOF}")]);
+        assert_eq!(
+            errors,
+            ["line 2001: the compressed file is cut short; the rest is lost"]
+        );
         let mut bad = gz.clone();
         let k = bad.len() - 8;
         bad[k] ^= 1;
         let (_, errors) = read_all("crc.log.gz", &bad);
-        assert!(errors[0].starts_with("line 2001: read error: BadGzipFile: CRC check failed 0x"));
+        assert!(
+            errors[0].starts_with("line 2001: the compressed data is damaged (CRC check failed 0x")
+        );
         let (n, errors) = read_all("not.log.gz", b"(1.0) can0 123#11\n");
         assert_eq!(n, 0);
         assert_eq!(
             errors,
-            ["line 1: read error: BadGzipFile: Not a gzipped file (b'(1')"]
+            ["line 1: not gzip data, though its name ends in .gz"]
         );
     }
 }

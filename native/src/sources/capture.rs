@@ -16,6 +16,7 @@
 //! messages. Differential check: 1,500 random cut/flipped/padded multi-member files gave the
 //! same chunks, positions and messages as capture.py.
 
+use super::compressed::compression_damage;
 use flate2::{Decompress, FlushDecompress, Status};
 use std::fs::File;
 use std::io::{self, Read};
@@ -347,11 +348,16 @@ impl GzipBytesReader {
             }
             Err(Stop::Caught(c)) => {
                 // the caller names the file (as the Python reader leaves it to the caller)
-                self.errors.push(format!(
-                    "compressed data damaged or cut short after {} bytes ({}: {}); the rest \
-                     is lost",
-                    self.total, c.kind, c.text
-                ));
+                let after = format!(" after {} bytes", self.total);
+                let at_start = self.total == 0;
+                self.errors.push(
+                    compression_damage(c.kind, &c.text, at_start, &after).unwrap_or_else(|| {
+                        format!(
+                            "read error{after} ({}: {}); the rest is lost",
+                            c.kind, c.text
+                        )
+                    }),
+                );
                 self.finish();
                 Ok(None)
             }
@@ -658,15 +664,15 @@ mod tests {
         assert_eq!(
             errors,
             [
-                "compressed data damaged or cut short after 5000 bytes (BadGzipFile: Not a \
-              gzipped file (b'ga')); the rest is lost"
+                "the compressed data is damaged after 5000 bytes (Not a gzipped file \
+                 (b'ga')); the rest is lost"
             ]
         );
         let (_, errors, _) = read_all("cut", &good[..good.len() - 3]);
-        assert!(errors[0].ends_with(
-            "after 5000 bytes (EOFError: Compressed file ended before the end-of-stream marker \
-             was reached); the rest is lost"
-        ));
+        assert_eq!(
+            errors,
+            ["the compressed file is cut short after 5000 bytes; the rest is lost"]
+        );
         let (got, errors, res) = read_all("empty", b"");
         assert!(got.is_empty() && errors.is_empty() && res.is_ok());
     }

@@ -2,4 +2,5 @@
 
 pub mod candump;
 pub mod capture;
+pub mod compressed;
 pub mod sniff;
