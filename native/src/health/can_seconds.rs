@@ -5,7 +5,8 @@
 
 use crate::decoders::can_bits::frame_bits;
 use crate::decoders::model::CanFrame;
-use crate::hash::FastMap;
+use crate::hash::{FastHasher, FastMap};
+use std::hash::Hasher;
 
 /// One bus's frames in one second (`second`: `floor(t)`, None for frames without a time).
 #[derive(Debug, Clone, PartialEq)]
@@ -26,14 +27,24 @@ pub struct Second {
 /// An error frame: bus, time, error class (its identifier), data.
 pub type ErrorFrame = (usize, Option<f64>, u32, Vec<u8>);
 
-/// Distinct frames whose bits are remembered (then the memo starts again), as Python's `_memo`.
-const MEMO_LIMIT: usize = 1 << 16;
+/// Places of the memo: a gripper's polls repeat within far fewer frames; a fixed table keeps
+/// the memory flat and in the cache.
+const MEMO_PLACES: usize = 1 << 10;
 
-/// `frame_bits` remembered per distinct classic frame: a gripper's polls repeat, and the CRC and
-/// stuff bits of each would cost more than the rest of the count.
-#[derive(Default)]
+/// `frame_bits` remembered per distinct classic frame, one frame per place (a frame that hashes
+/// to a taken place takes it over): a gripper's polls repeat, and the CRC and stuff bits of each
+/// would cost more than the rest of the count.
 pub struct BitsMemo {
-    bits: FastMap<u128, Option<u32>>,
+    /// (key, bits) by the key's hash; key 0: an empty place (`memo_key` is never 0)
+    places: Box<[(u128, Option<u32>)]>,
+}
+
+impl Default for BitsMemo {
+    fn default() -> Self {
+        BitsMemo {
+            places: vec![(0, None); MEMO_PLACES].into_boxed_slice(),
+        }
+    }
 }
 
 impl BitsMemo {
@@ -42,17 +53,18 @@ impl BitsMemo {
         let Some(key) = memo_key(frame) else {
             return frame_bits(frame).ok();
         };
-        if let Some(&bits) = self.bits.get(&key) {
-            return bits;
+        let mut hasher = FastHasher::default();
+        hasher.write_u128(key);
+        let place = &mut self.places[hasher.finish() as usize % MEMO_PLACES];
+        if place.0 != key {
+            *place = (key, frame_bits(frame).ok());
         }
-        let bits = frame_bits(frame).ok();
-        if self.bits.len() >= MEMO_LIMIT {
-            self.bits.clear();
-        }
-        self.bits.insert(key, bits);
-        bits
+        place.1
     }
 }
+
+/// A bit no field of a key uses, set in every key: a key is never 0.
+const MEMO_KEY_MARK: u128 = 1 << 80;
 
 /// Everything `frame_bits` reads, as one number: the data (at most 8 bytes), their count, the
 /// DLC, the flags and the identifier; None for a frame that does not fit (never a classic one).
@@ -68,7 +80,8 @@ fn memo_key(frame: &CanFrame) -> Option<u128> {
         | u128::from(frame.is_error) << 2
         | u128::from(frame.is_fd) << 3;
     Some(
-        u128::from(u64::from_le_bytes(bytes))
+        MEMO_KEY_MARK
+            | u128::from(u64::from_le_bytes(bytes))
             | (data.len() as u128) << 64
             | (length as u128) << 68
             | flags << 72
@@ -184,7 +197,8 @@ mod tests {
                 assert_eq!(memo.bits(f), frame_bits(f).ok());
             }
         }
-        assert_eq!(memo.bits.len(), 10); // all but the 12 data bytes
+        let taken = memo.places.iter().filter(|p| p.0 != 0).count();
+        assert_eq!(taken, 10); // all but the 12 data bytes, each in a place of its own
         assert_eq!(frames.iter().filter(|f| memo.bits(f).is_some()).count(), 5);
     }
 
