@@ -28,7 +28,7 @@ from .sources.naming import BUS_BY_PROTOCOL
 from .sources.source import LiveSource
 
 if TYPE_CHECKING:
-    from .sim.rig import DemoOptions
+    from .sim.demo_options import DemoOptions
 
 # a live command's own listeners: a list, or what makes them once the taps are open
 Extra = list[Listener] | Callable[[], list[Listener]] | None

@@ -7,7 +7,7 @@ from typing import Any
 
 from ..errors import UsageError
 from ..live_runner import run_demo
-from ..sim.rig import BUSES, DemoOptions
+from ..sim.demo_options import BUSES, DemoOptions
 from ..sim.scenarios import NAMES, Scenario, scenario
 from .common import add_session_arguments, live_options, positive_float, probability
 from .helptext import LIVE_EXIT_STATUS, HelpFormatter, epilog

@@ -18,7 +18,7 @@ from ..session.capture import (
     raise_output_failure,
     run_capture,
 )
-from ..sim.rig import DemoOptions
+from ..sim.demo_options import DemoOptions
 from ..sources.tap_options import TapOptions, make_taps
 from .listener import CyclesListener
 from .outputs import BINARY, FORMATS, CsvCycles, CycleOutput, JsonlCycles, TextCycles

@@ -14,7 +14,7 @@ from ..session.batches import session_engine
 from ..session.capture import CaptureOptions, finish_capture, open_reader, run_capture
 from ..session.listener import Listener
 from ..session.session import Session
-from ..sim.rig import DemoOptions
+from ..sim.demo_options import DemoOptions
 from ..sources.capture import CaptureReader
 from ..sources.tap_options import TapOptions, make_taps
 from .target import RerunTarget, TargetChoice, chosen_target

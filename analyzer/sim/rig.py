@@ -19,7 +19,6 @@ import contextlib
 import os
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any
 
 from decoders.model import EG2_SERIAL, MODBUS_RTU
@@ -29,6 +28,7 @@ from ..outfile import output_stream
 from ..sources.can_tap import CanTap
 from ..sources.live import Tap, wait_open
 from ..sources.serial_tap import SerialTap
+from .demo_options import BUSES, DemoOptions
 from .endpoints import CanGripperServer, ModbusGripperServer, SerialGripperServer
 from .gripper import GripperModel
 from .host import HostQuirks, HostResult, run_host_cycle
@@ -36,22 +36,7 @@ from .play import TruthLog, play_scenario
 from .ptybus import PtyBus
 from .scenarios import Scenario
 
-BUSES = ("serial", "modbus", "can")
 BUS_NAMES = {"serial": "rs232", "modbus": "rs485", "can": "can0"}
-
-
-@dataclass(frozen=True)
-class DemoOptions:
-    """The demo a command asks for: which of ``BUSES`` to simulate, the probability of a
-    corrupted, garbled or dropped response, the scenario to play (None: the pick-and-place
-    cycles on grippers 1 and 2), the jaw's speed-up ``pace``, and the file the scenario's truth
-    goes to (None: none)."""
-
-    buses: tuple[str, ...]
-    noise: float
-    scenario: Scenario | None = None
-    pace: float = 1.0
-    truth: str | None = None
 
 
 class DemoRig(Running):

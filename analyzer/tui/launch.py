@@ -24,7 +24,8 @@ from ..session.batches import session_engine
 from ..session.capture import CaptureOptions, byte_protocol, exit_code, open_reader
 from ..session.listener import Listener
 from ..session.session import Session, SessionOptions, signals_call
-from ..sim.rig import DemoOptions, DemoRig
+from ..sim.demo_options import DemoOptions
+from ..sim.rig import DemoRig
 from ..sources.live import Tap
 from ..sources.tap_options import TapOptions, make_taps
 from .bus_rates import live_rates

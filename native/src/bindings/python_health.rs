@@ -5,10 +5,17 @@
 use super::python_frames::FrameBatch;
 use super::python_live::{for_each_item, is_can_item, read_item};
 use crate::decoders::model::CanFrame;
-use crate::health::can_seconds::SecondsCount;
+use crate::health::can_seconds::{BitsMemo, SecondsCount};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList, PyString, PyTuple};
+use std::cell::Cell;
 use std::sync::Arc;
+
+thread_local! {
+    /// The bits of the frames this thread has counted, from one call to the next (taken out
+    /// while a call runs).
+    static MEMO: Cell<BitsMemo> = Cell::new(BitsMemo::default());
+}
 
 /// `can_seconds(items) -> (seconds, error_frames, others)`: the CAN frames of `items` (a native
 /// `FrameBatch`, or Items: byte chunks among them are counted in `others` and skipped) per bus
@@ -16,14 +23,17 @@ use std::sync::Arc;
 /// in the order they first appear; the error frames as `(bus, t, error_class, data)`.
 #[pyfunction]
 fn can_seconds<'py>(py: Python<'py>, items: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyTuple>> {
-    let mut count = SecondsCount::default();
+    let mut count = SecondsCount::with_memo(MEMO.with(Cell::take));
     let mut buses: Vec<String> = Vec::new();
-    let mut others = 0u64;
-    if let Ok(batch) = items.downcast::<FrameBatch>() {
-        count_batch(&mut count, &mut buses, &batch.get().frames);
-    } else {
-        others = count_items(&mut count, &mut buses, items)?;
-    }
+    let counted = match items.downcast::<FrameBatch>() {
+        Ok(batch) => {
+            count_batch(&mut count, &mut buses, &batch.get().frames);
+            Ok(0)
+        }
+        Err(_) => count_items(&mut count, &mut buses, items),
+    };
+    MEMO.with(|m| m.set(std::mem::take(&mut count.memo)));
+    let others: u64 = counted?;
     let seconds = count.seconds.iter().map(|s| {
         (
             &buses[s.bus],

@@ -5,7 +5,8 @@
 
 use crate::decoders::can_bits::frame_bits;
 use crate::decoders::model::CanFrame;
-use crate::hash::FastMap;
+use crate::hash::{FastHasher, FastMap};
+use std::hash::Hasher;
 
 /// One bus's frames in one second (`second`: `floor(t)`, None for frames without a time).
 #[derive(Debug, Clone, PartialEq)]
@@ -26,15 +27,88 @@ pub struct Second {
 /// An error frame: bus, time, error class (its identifier), data.
 pub type ErrorFrame = (usize, Option<f64>, u32, Vec<u8>);
 
+/// Places of the memo: a gripper's polls repeat within far fewer frames; a fixed table keeps
+/// the memory flat and in the cache.
+const MEMO_PLACES: usize = 1 << 10;
+
+/// `frame_bits` remembered per distinct classic frame, one frame per place (a frame that hashes
+/// to a taken place takes it over): a gripper's polls repeat, and the CRC and stuff bits of each
+/// would cost more than the rest of the count.
+pub struct BitsMemo {
+    /// (key, bits) by the key's hash; key 0: an empty place (`memo_key` is never 0)
+    places: Box<[(u128, Option<u32>)]>,
+}
+
+impl Default for BitsMemo {
+    fn default() -> Self {
+        BitsMemo {
+            places: vec![(0, None); MEMO_PLACES].into_boxed_slice(),
+        }
+    }
+}
+
+impl BitsMemo {
+    /// `frame_bits` of `frame`, None for a frame whose bits are not counted.
+    pub fn bits(&mut self, frame: &CanFrame) -> Option<u32> {
+        let Some(key) = memo_key(frame) else {
+            return frame_bits(frame).ok();
+        };
+        let mut hasher = FastHasher::default();
+        hasher.write_u128(key);
+        let place = &mut self.places[hasher.finish() as usize % MEMO_PLACES];
+        if place.0 != key {
+            *place = (key, frame_bits(frame).ok());
+        }
+        place.1
+    }
+}
+
+/// A bit no field of a key uses, set in every key: a key is never 0.
+const MEMO_KEY_MARK: u128 = 1 << 80;
+
+/// Everything `frame_bits` reads, as one number: the data (at most 8 bytes), their count, the
+/// DLC, the flags and the identifier; None for a frame that does not fit (never a classic one).
+fn memo_key(frame: &CanFrame) -> Option<u128> {
+    let (data, length) = (&frame.data, frame.length());
+    if data.len() > 8 || length > 15 {
+        return None;
+    }
+    let mut bytes = [0u8; 8];
+    bytes[..data.len()].copy_from_slice(data);
+    let flags = u128::from(frame.is_extended)
+        | u128::from(frame.is_remote) << 1
+        | u128::from(frame.is_error) << 2
+        | u128::from(frame.is_fd) << 3;
+    Some(
+        MEMO_KEY_MARK
+            | u128::from(u64::from_le_bytes(bytes))
+            | (data.len() as u128) << 64
+            | (length as u128) << 68
+            | flags << 72
+            | u128::from(frame.arbitration_id) << 96,
+    )
+}
+
 /// The seconds and error frames of a run of frames, in the order each first appears.
 #[derive(Default)]
 pub struct SecondsCount {
     index: FastMap<(usize, Option<i64>), usize>,
+    /// the last frame's key and its second's place: frames come in time order, mostly
+    last: Option<((usize, Option<i64>), usize)>,
+    pub memo: BitsMemo,
     pub seconds: Vec<Second>,
     pub errors: Vec<ErrorFrame>,
 }
 
 impl SecondsCount {
+    /// A count that starts with the bits `memo` remembers.
+    pub fn with_memo(memo: BitsMemo) -> Self {
+        Self {
+            memo,
+            ..Self::default()
+        }
+    }
+
     /// Count one frame of bus number `bus`.
     pub fn add(&mut self, bus: usize, frame: &CanFrame) {
         let t = frame.t.filter(|t| t.is_finite());
@@ -43,22 +117,13 @@ impl SecondsCount {
                 .push((bus, t, frame.arbitration_id, frame.data.clone()));
             return;
         }
-        let bits = frame_bits(frame).ok();
+        let bits = self.memo.bits(frame);
         let key = (bus, t.map(|t| t.floor() as i64));
-        let seconds = &mut self.seconds;
-        let at = *self.index.entry(key).or_insert_with(|| {
-            seconds.push(Second {
-                bus,
-                second: key.1,
-                frames: 0,
-                bits: 0,
-                uncounted: 0,
-                first_t: t,
-                first_bits: bits.unwrap_or(0),
-                last_t: t,
-            });
-            seconds.len() - 1
-        });
+        let at = match self.last {
+            Some((last, at)) if last == key => at,
+            _ => self.place(key, t, bits),
+        };
+        self.last = Some((key, at));
         let s = &mut self.seconds[at];
         s.frames += 1;
         match bits {
@@ -75,6 +140,24 @@ impl SecondsCount {
             }
         }
     }
+
+    /// Where the second `key` is counted, a new one (with this first frame) when it is new.
+    fn place(&mut self, key: (usize, Option<i64>), t: Option<f64>, bits: Option<u32>) -> usize {
+        let seconds = &mut self.seconds;
+        *self.index.entry(key).or_insert_with(|| {
+            seconds.push(Second {
+                bus: key.0,
+                second: key.1,
+                frames: 0,
+                bits: 0,
+                uncounted: 0,
+                first_t: t,
+                first_bits: bits.unwrap_or(0),
+                last_t: t,
+            });
+            seconds.len() - 1
+        })
+    }
 }
 
 #[cfg(test)]
@@ -88,6 +171,35 @@ mod tests {
             data: data.to_vec(),
             ..CanFrame::default()
         }
+    }
+
+    #[test]
+    fn remembered_bits_are_the_bits_of_each_frame() {
+        let mut memo = BitsMemo::default();
+        let mut frames = vec![frame(Some(1.0), &[1, 2]), frame(None, &[0; 8])];
+        let mut remote = frame(None, &[]);
+        remote.is_remote = true;
+        remote.dlc = Some(2);
+        let mut fd = frame(None, &[0; 12]);
+        fd.is_fd = true;
+        let mut wrong_dlc = frame(None, &[1, 2]);
+        wrong_dlc.dlc = Some(3);
+        let mut extended = frame(None, &[1, 2]);
+        extended.is_extended = true;
+        frames.extend([remote, fd, wrong_dlc, extended]);
+        let standard = frames.iter().map(|f| CanFrame {
+            arbitration_id: 0x123,
+            ..f.clone()
+        });
+        frames.extend(standard.collect::<Vec<_>>());
+        for _ in 0..2 {
+            for f in &frames {
+                assert_eq!(memo.bits(f), frame_bits(f).ok());
+            }
+        }
+        let taken = memo.places.iter().filter(|p| p.0 != 0).count();
+        assert_eq!(taken, 10); // all but the 12 data bytes, each in a place of its own
+        assert_eq!(frames.iter().filter(|f| memo.bits(f).is_some()).count(), 5);
     }
 
     #[test]
