@@ -16,7 +16,6 @@ from rich.text import Text
 from textual import events
 from textual.binding import Binding, BindingType
 from textual.geometry import Size
-from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
 from ...cycles import model as M
@@ -25,6 +24,7 @@ from ..layout import CycleLayout, cycle_layout
 from ..messages import CycleChosen
 from ..rows import fit
 from ..store import RecordStore
+from .cursor_list import CURSOR_CLASS, CursorList
 
 OUTCOME_STYLES: Final = {
     M.GRIPPED: Style(color="green", bold=True),
@@ -100,25 +100,17 @@ def render_cycle(c: Cycle, t0: float | None, cols: CycleLayout, chosen: bool = F
     return text
 
 
-class CyclesPanel(ScrollView, can_focus=True):
+class CyclesPanel(CursorList):
     """See the module doc. ``store``: where the capture's first time is read (relative
     times, as the frame list's)."""
 
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("up,k", "cursor(-1)", "up", show=False),
-        Binding("down,j", "cursor(1)", "down", show=False),
-        Binding("pageup", "page(-1)", "page up", show=False),
-        Binding("pagedown", "page(1)", "page down", show=False),
-        Binding("home", "first", "first", show=False),
-        Binding("end,G", "follow", "follow", show=False),
         Binding("enter", "choose", "show the cycle's frames", show=False),
     ]
-    COMPONENT_CLASSES: ClassVar[set[str]] = {"cycles-panel--cursor"}
     DEFAULT_CSS = """
-    CyclesPanel { height: 1fr; background: $surface; overflow-x: hidden; }
-    CyclesPanel > .cycles-panel--cursor { background: $accent 40%; }
-    CyclesPanel:focus > .cycles-panel--cursor { background: $accent 70%; }
+    CyclesPanel { height: 1fr; }
     """
+    HEADER_ROWS = 1
 
     def __init__(self, store: RecordStore, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -158,6 +150,10 @@ class CyclesPanel(ScrollView, can_focus=True):
             self.refresh()
 
     @property
+    def row_count(self) -> int:
+        return len(self.cycles)
+
+    @property
     def selected(self) -> Cycle | None:
         return self.cycles[self.cursor] if 0 <= self.cursor < len(self.cycles) else None
 
@@ -174,18 +170,6 @@ class CyclesPanel(ScrollView, can_focus=True):
             self.scroll_to(y=target, animate=False, immediate=True, force=True)
         self.refresh()
 
-    def action_cursor(self, step: int) -> None:
-        self.move_to(self.cursor + step)
-
-    def action_page(self, step: int) -> None:
-        self.move_to(self.cursor + step * max(1, self.scrollable_content_region.height - 2))
-
-    def action_first(self) -> None:
-        self.move_to(0)
-
-    def action_follow(self) -> None:
-        self.move_to(len(self.cycles) - 1, follow=True)
-
     def action_choose(self) -> None:
         cycle = self.selected
         if cycle is not None:
@@ -193,21 +177,9 @@ class CyclesPanel(ScrollView, can_focus=True):
             self.refresh()
             self.post_message(CycleChosen(cycle))
 
-    def on_click(self, event: events.Click) -> None:
-        offset = event.get_content_offset(self)
-        if offset is not None and offset.y > 0:
-            self.move_to(self.scroll_offset.y + offset.y - 1)
-
     def _resize(self) -> None:
         size = Size(self.scrollable_content_region.width, len(self.cycles) + 1)  # + the header
-        height = self.scrollable_content_region.height
-        if height and min(size.height, self.virtual_size.height) > height:
-            # longer, with the scroll bar shown already: only the bar changes, no layout of
-            # the screen (cycles end many times a second on a busy bus; FrameList does so too)
-            self.set_reactive(CyclesPanel.virtual_size, size)
-            self._scroll_update(size)
-        else:
-            self.virtual_size = size
+        self._grow_to(size)  # cycles end many times a second on a busy bus
 
     def on_resize(self, event: events.Resize) -> None:
         self._catch_up()
@@ -230,7 +202,7 @@ class CyclesPanel(ScrollView, can_focus=True):
         text = render_cycle(cycle, self.store.t0, cols, cycle is self.chosen)
         if position != self.cursor:
             return self._strip(text, width)
-        cursor = Style(bgcolor=self.get_component_rich_style("cycles-panel--cursor").bgcolor)
+        cursor = Style(bgcolor=self.get_component_rich_style(CURSOR_CLASS).bgcolor)
         text.stylize(cursor)
         return self._strip(text, width, self.rich_style + cursor)
 

@@ -17,15 +17,13 @@ from __future__ import annotations
 import re
 from array import array
 from bisect import bisect_left
-from typing import Any, ClassVar
+from typing import Any
 
 from rich.style import Style
 from textual import events
-from textual.binding import Binding, BindingType
 from textual.cache import LRUCache
 from textual.geometry import Size
 from textual.reactive import reactive
-from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
 from ..filter import CompiledFilter
@@ -33,27 +31,13 @@ from ..layout import RowLayout, row_layout
 from ..messages import RowSelected
 from ..rows import MARKER_EVIDENCE, STYLE_MATCH, TimeMode, render_row
 from ..store import OK, RecordStore
+from .cursor_list import CURSOR_CLASS, CursorList
 
 NO_STYLE = Style()  # padding: as no style, but one a filter can read
 
 
-class FrameList(ScrollView, can_focus=True):
+class FrameList(CursorList):
     """See the module doc."""
-
-    BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("up,k", "cursor(-1)", "up", show=False),
-        Binding("down,j", "cursor(1)", "down", show=False),
-        Binding("pageup", "page(-1)", "page up", show=False),
-        Binding("pagedown", "page(1)", "page down", show=False),
-        Binding("home", "first", "first", show=False),
-        Binding("end,G", "follow", "follow", show=False),
-    ]
-    COMPONENT_CLASSES: ClassVar[set[str]] = {"frame-list--cursor"}
-    DEFAULT_CSS = """
-    FrameList { background: $surface; overflow-x: hidden; }
-    FrameList > .frame-list--cursor { background: $accent 40%; }
-    FrameList:focus > .frame-list--cursor { background: $accent 70%; }
-    """
 
     follow: reactive[bool] = reactive(True)
 
@@ -165,15 +149,7 @@ class FrameList(ScrollView, can_focus=True):
         size = Size(self.scrollable_content_region.width, self.row_count)
         if size == self.virtual_size:
             return
-        height = self.scrollable_content_region.height
-        if height and min(size.height, self.virtual_size.height) > height:
-            # longer, with the scroll bar already shown: only the scroll bar changes. Setting
-            # virtual_size asks for a layout of the whole screen, 10 times a second on a live
-            # bus, which cost more than drawing the rows
-            self.set_reactive(FrameList.virtual_size, size)
-            self._scroll_update(size)
-        else:
-            self.virtual_size = size
+        self._grow_to(size)
 
     def restyle(self) -> None:
         """Forget the rendered lines (time mode, reference, search, marks or theme changed)."""
@@ -188,7 +164,7 @@ class FrameList(ScrollView, can_focus=True):
     def _base_and_cursor(self) -> tuple[Style, Style]:
         # resolving a widget's style walks the DOM: once per theme, not once per row
         if self._styles is None:
-            cursor = self.get_component_rich_style("frame-list--cursor")
+            cursor = self.get_component_rich_style(CURSOR_CLASS)
             self._styles = (self.rich_style, Style(bgcolor=cursor.bgcolor))
         return self._styles
 
@@ -231,18 +207,6 @@ class FrameList(ScrollView, can_focus=True):
             self._selected = selected
             self.post_message(RowSelected(selected))
 
-    def action_cursor(self, step: int) -> None:
-        self.move_to(self.cursor + step)
-
-    def action_page(self, step: int) -> None:
-        self.move_to(self.cursor + step * max(1, self.scrollable_content_region.height - 1))
-
-    def action_first(self) -> None:
-        self.move_to(0)
-
-    def action_follow(self) -> None:
-        self.move_to(self.row_count - 1, follow=True)
-
     def _fit_width(self) -> None:
         """Lay rows out for the list's width (it changes with the terminal, the panes and the
         vertical scroll bar)."""
@@ -261,11 +225,6 @@ class FrameList(ScrollView, can_focus=True):
 
     def on_mouse_scroll_up(self, event: events.MouseScrollUp) -> None:
         self.follow = False
-
-    def on_click(self, event: events.Click) -> None:
-        offset = event.get_content_offset(self)
-        if offset is not None:
-            self.move_to(self.scroll_offset.y + offset.y)
 
     # -- searching and problems -------------------------------------------------------------
 

@@ -88,9 +88,19 @@ pub fn bytes_repr(s: &[u8]) -> String {
     out
 }
 
-/// `repr(str)` of a string that holds ASCII and U+FFFD only (`bytes.decode("ascii",
-/// "replace")`): printable characters as they are, control characters escaped.
-fn str_repr(s: &str) -> String {
+/// What a Python string literal does with a character past ASCII.
+#[derive(Clone, Copy, PartialEq)]
+enum NonAscii {
+    /// As it is: `repr(str)`.
+    Keep,
+    /// As `\xNN`: `ascii(str)` (the strings here are latin-1, so two digits do).
+    Escape,
+}
+
+/// `repr(str)` or `ascii(str)` of a string that holds ASCII and either U+FFFD only
+/// (`bytes.decode("ascii", "replace")`, kept) or latin-1 (escaped): printable ASCII as it
+/// is, control characters escaped.
+fn str_literal(s: &str, non_ascii: NonAscii) -> String {
     let quote = if s.contains('\'') && !s.contains('"') {
         '"'
     } else {
@@ -108,7 +118,10 @@ fn str_repr(s: &str) -> String {
                 out.push('\\');
                 out.push(quote);
             }
-            '\0'..='\x1f' | '\x7f' => out.push_str(&format!("\\x{:02x}", c as u32)),
+            ' '..='~' => out.push(c),
+            _ if c.is_ascii() || non_ascii == NonAscii::Escape => {
+                out.push_str(&format!("\\x{:02x}", c as u32))
+            }
             _ => out.push(c),
         }
     }
@@ -317,34 +330,7 @@ fn quote(line: &[u8], limit: usize) -> String {
     let text: String = line.iter().map(|&b| b as char).collect(); // latin-1
                                                                   // candump.py `STRIPPED`: what str.strip takes of ASCII
     let text = text.trim_matches(|c: char| matches!(c, '\t'..='\r' | '\x1c'..='\x1f' | ' '));
-    str_ascii(&cut_chars(text, limit))
-}
-
-/// `ascii(str)` of a latin-1 string: as `repr`, with every character past ASCII as `\xNN`.
-fn str_ascii(s: &str) -> String {
-    let quote = if s.contains('\'') && !s.contains('"') {
-        '"'
-    } else {
-        '\''
-    };
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push(quote);
-    for c in s.chars() {
-        match c {
-            '\\' => out.push_str("\\\\"),
-            '\t' => out.push_str("\\t"),
-            '\n' => out.push_str("\\n"),
-            '\r' => out.push_str("\\r"),
-            _ if c == quote => {
-                out.push('\\');
-                out.push(quote);
-            }
-            ' '..='~' => out.push(c),
-            _ => out.push_str(&format!("\\x{:02x}", c as u32)),
-        }
-    }
-    out.push(quote);
-    out
+    str_literal(&cut_chars(text, limit), NonAscii::Escape)
 }
 
 /// `text` cut at `limit` characters, the last three of them "..." (as the Python cuts).
@@ -1297,7 +1283,7 @@ fn identifier(ident: &[u8]) -> Result<(u64, bool, bool), String> {
     if ident.is_empty() || !all_hex(ident) || ident.len() > 8 {
         return Err(format!(
             "bad identifier {}",
-            str_repr(&ascii_replace(ident))
+            str_literal(&ascii_replace(ident), NonAscii::Keep)
         ));
     }
     let mut aid = ident
@@ -1459,7 +1445,10 @@ fn columns_frame(body: &[&[u8]], frame: &mut CanFrame) -> Result<(), String> {
     };
     let isdigit = !digits.is_empty() && digits.iter().all(u8::is_ascii_digit);
     if length.last() != Some(&b']') || !isdigit || digits.len() > 2 {
-        return Err(format!("bad length {}", str_repr(&ascii_replace(length))));
+        return Err(format!(
+            "bad length {}",
+            str_literal(&ascii_replace(length), NonAscii::Keep)
+        ));
     }
     let n = digits
         .iter()
@@ -1616,6 +1605,15 @@ mod tests {
         assert_eq!(
             quote(b"\xff\x80 a'b\xc3(\n", 80),
             "\"\\xff\\x80 a'b\\xc3(\""
+        );
+        // repr() keeps U+FFFD, ascii() escapes past ASCII; both escape controls
+        assert_eq!(
+            str_literal("a\x7f\x01\u{FFFD}'", NonAscii::Keep),
+            "\"a\\x7f\\x01\u{FFFD}'\""
+        );
+        assert_eq!(
+            str_literal("\t\x7f\u{e9}", NonAscii::Escape),
+            "'\\t\\x7f\\xe9'"
         );
         assert_eq!(can_bus_name(Some("1")), "can1");
         assert_eq!(can_bus_name(Some("")), "can0");
