@@ -29,6 +29,10 @@ $(NATIVE): $(STAMP) $(NATIVE_SRC)
 	$(BIN)/python native/codegen.py
 	@rm -f analyzer/_native*.so  # a failed build must not leave the old core in place
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	@# with cargo present a build error must stop here (setuptools-rust would go on without it)
+	@if command -v cargo >/dev/null 2>&1 && ! $(BIN)/python -c "import analyzer._native"; then \
+		echo "the native core did not build: run '$(BIN)/python -m pip install -v --no-deps -e .' to see why" >&2; \
+		exit 1; fi
 	@touch $(NATIVE)
 	@$(BIN)/eg2scope --version
 
