@@ -51,7 +51,6 @@ FRAMING_TRUNCATED: Final = Message(
 FRAMING_CUT_OFF: Final = Message(
     F.CUT_OFF,
     "cut off by the stop: the capture was stopped {bytes} into this frame",
-    native=False,
 )
 
 # -- the serial protocol (decoders/eg2_serial.py) -------------------------------------------

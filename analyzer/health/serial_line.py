@@ -91,6 +91,29 @@ class SerialLine:
             self._log(math.floor(rec.t), rec.kind == FRAME, flags)
         self._last = None if times is None else (times, rec.kind == FRAME)
 
+    @property
+    def untimed(self) -> bool:
+        """No read so far had a time (a raw dump): its records have no times either."""
+        return self.first_t is None
+
+    def add_untimed(self, records: Any) -> None:
+        """``add_record`` of every record of a sequence (a ``RecordSequence`` or a native
+        ``RecordBatch``) while the line is ``untimed``, in bulk: with no times there are no
+        gaps, turnarounds or seconds, only the counts."""
+        kinds = records.column("kind")
+        frames = kinds.count(FRAME)
+        if frames:
+            self.frames += frames
+            self.protocol = self.protocol or records[kinds.index(FRAME)].protocol
+        if records.error_count():
+            for rec in records.take(records.problems()):
+                if rec.errors:
+                    self.errors += 1
+                    self.error_counts.update(f for f in rec.flags if f in ERROR_FLAGS)
+        self._last = None
+        for clock in self.clocks.values():
+            clock.reads.clear()  # reads without a time give no frame times: none to find
+
     def _times(self, rec: Record) -> FrameTimes | None:
         clock = self._clock(rec)
         if clock is None or rec.offset is None:

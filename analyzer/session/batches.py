@@ -11,8 +11,11 @@ reference the native ones are tested against (tests/analyzer/test_sequences.py).
 call the methods, so a listener that writes JSON (the recorder) makes no object per frame on the
 native path and the same bytes on the Python one.
 
-Byte streams keep the Python decoders: their protocol is detected per stream, frames are timed
-per byte and ended by idle gaps, and a serial line carries a fraction of a CAN bus's frames.
+A session on one byte stream (a raw serial or Modbus dump replayed) decodes with
+``_native.ByteStage`` and tracks with the native ``Tracker`` in the same way. Several byte
+streams (recordings, live taps) keep the Python decoders: their records are merged by time, they
+are timed per byte and ended by idle gaps, and a serial line carries a fraction of a CAN bus's
+frames.
 """
 
 from __future__ import annotations
@@ -60,16 +63,25 @@ def session_engine(
     byte_time_s: dict[str, float] | None = None,
 ) -> tuple[SessionDecoding, Any]:
     """The decoding and tracker of a session whose source gives ``kind`` input ("can", "bytes"
-    or "mixed"): the native core's for CAN input when it is built (``engine`` "auto") or asked
-    for ("native": ValueError where it cannot be used), else the Python ones."""
+    or "mixed"; ``positional``: one stream, a single-stream capture): the native core's for CAN
+    input and for one byte stream when it is built (``engine`` "auto") or asked for ("native":
+    ValueError where it cannot be used), else the Python ones."""
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; choose from {', '.join(ENGINES)}")
-    native = kind == "can" and native_session_available()
+    one_stream = kind == "bytes" and positional and not per_bus and not byte_time_s
+    native = (kind == "can" or one_stream) and native_session_available()
     if engine == "native" and not native:
-        why = "it is not built" if not native_session_available() else "the input is not CAN"
+        why = (
+            "it is not built"
+            if not native_session_available()
+            else "it decodes CAN input and single byte streams (raw dumps), not this"
+        )
         raise ValueError(f"the native engine cannot decode this session: {why}")
     if native and engine != "python":
-        return NativeCanDecoding(positional), _native.Tracker()  # type: ignore[union-attr]
+        tracker = _native.Tracker()  # type: ignore[union-attr]
+        if kind == "can":
+            return NativeCanDecoding(positional), tracker
+        return NativeByteDecoding(protocol), tracker
     decoding = PythonDecoding(protocol, per_bus, positional_seq=positional, byte_time_s=byte_time_s)
     return decoding, PythonTracker()
 
@@ -120,6 +132,21 @@ class NativeCanDecoding:
     def set_protocol(self, bus: str, protocol: str) -> None:
         """Byte-stream protocols do not apply: this decoding is chosen for CAN-only input."""
         raise ValueError(f"a CAN session has no byte streams to decode as {protocol} ({bus})")
+
+
+class NativeByteDecoding:
+    """``SessionDecoding`` over ``_native.ByteStage``: the chunks of one byte stream in, a
+    ``RecordBatch`` out."""
+
+    def __init__(self, protocol: str | None) -> None:
+        core = _native.ByteStage(protocol)  # type: ignore[union-attr]
+        self.feed_items = core.feed
+        self.tick = core.tick
+        self.gap = core.gap
+        self.cut_off = core.cut_off
+        self.finish = core.finish
+        self.stop = core.stop
+        self.set_protocol = core.set_protocol
 
 
 class RecordSequence(list[Record]):

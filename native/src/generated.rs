@@ -840,6 +840,19 @@ pub mod messages {
     pub(crate) use modbus_truncated_lengths;
 
     // cut_off
+    /// `FRAMING_CUT_OFF`: `framing_cut_off!(bytes = ..)`
+    macro_rules! framing_cut_off {
+        ($($arg:tt)*) => {
+            (
+                $crate::generated::flags::CUT_OFF,
+                format!(
+                    "cut off by the stop: the capture was stopped {bytes} into this frame",
+                    $($arg)*
+                ),
+            )
+        };
+    }
+    pub(crate) use framing_cut_off;
     /// `PAIRING_STOPPED`
     pub const PAIRING_STOPPED: (&str, &str) = (
         super::flags::CUT_OFF,

@@ -22,6 +22,7 @@ use std::io;
 use std::path::PathBuf;
 
 mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output
+mod python_bytes; // ByteStage: the session's decoding of one byte stream (a raw dump)
 mod python_cycles; // CycleSegmenter: grip cycles from a SampleBatch, analyzer/cycles/segmenter.py
 mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the native session
 mod python_health; // can_seconds: CAN frames per bus and second, for the bus load
@@ -391,6 +392,7 @@ impl PyDecodeRun {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyDecodeRun>()?;
     python_arrow::register(m)?;
+    python_bytes::register(m)?;
     python_cycles::register(m)?;
     python_frames::register(m)?;
     python_health::register(m)?;

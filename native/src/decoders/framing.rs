@@ -20,7 +20,7 @@
 //! Python calls them, since a protocol may keep state in them (Modbus remembers a swapped CRC).
 
 use crate::decoders::flags;
-use crate::decoders::model::{Record, GARBAGE, TRUNCATED};
+use crate::decoders::model::{Record, CUT_OFF, GARBAGE, TRUNCATED};
 use crate::generated::messages as M;
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -36,6 +36,9 @@ pub trait StreamDecoder {
     fn feed(&mut self, data: &[u8], t: Option<f64>, out: &mut Vec<Record>);
     /// End of input: decide everything held (truncated frames, garbage).
     fn finish(&mut self, out: &mut Vec<Record>);
+    /// The capture was stopped, not the stream ended: as `finish`, but a frame begun is a
+    /// `cut_off` record (no error: the stop cut it, not the bus).
+    fn stop(&mut self, out: &mut Vec<Record>);
     /// The stream's first byte is at `offset` of a larger capture (parallel parts).
     fn start_at(&mut self, offset: u64);
     /// Stream offset of the first byte not decided yet (None: nothing held).
@@ -172,6 +175,8 @@ pub struct ByteStreamDecoder<P: Framing> {
     garbage_why: &'static str,
     /// set by valid_start: a candidate needs bytes not yet received
     undecided: bool,
+    /// deciding the held bytes because the capture was stopped (`stop`)
+    stopping: bool,
 }
 
 impl<P: Framing> ByteStreamDecoder<P> {
@@ -197,6 +202,7 @@ impl<P: Framing> ByteStreamDecoder<P> {
             resume: 0,
             garbage_why: M::GARBAGE_NO_HEADER,
             undecided: false,
+            stopping: false,
         }
     }
 
@@ -473,6 +479,9 @@ impl<P: Framing> ByteStreamDecoder<P> {
 
     /// The bytes from `pos` to the end: a frame cut off by the end of the stream.
     fn truncated(&mut self, pos: usize) -> Record {
+        if self.stopping {
+            return self.cut_off_record(pos);
+        }
         let s = &mut self.stream;
         let raw = s.buf[pos..].to_vec();
         let n = raw.len();
@@ -487,6 +496,27 @@ impl<P: Framing> ByteStreamDecoder<P> {
     }
 }
 
+impl<P: Framing> ByteStreamDecoder<P> {
+    /// The bytes from `pos` to the end: a frame the capture's stop cut off.
+    fn cut_off_record(&mut self, pos: usize) -> Record {
+        let s = &mut self.stream;
+        let raw = s.buf[pos..].to_vec();
+        let n = if raw.len() == 1 {
+            "1 byte".to_string()
+        } else {
+            format!("{} bytes", raw.len())
+        };
+        let mut rec = Record::new(None, s.bus.clone(), P::PROTOCOL, CUT_OFF, raw);
+        rec.offset = Some(s.base + pos as u64);
+        let (flag, words) = M::framing_cut_off!(bytes = n);
+        rec.warnings.push(words);
+        rec.summary = format!("frame cut off by the stop ({n})").into();
+        rec.flags.push(flag);
+        s.stamp(&mut rec);
+        rec
+    }
+}
+
 impl<P: Framing> StreamDecoder for ByteStreamDecoder<P> {
     fn feed(&mut self, data: &[u8], t: Option<f64>, out: &mut Vec<Record>) {
         self.feed_chunk(data, t, None, out);
@@ -494,6 +524,12 @@ impl<P: Framing> StreamDecoder for ByteStreamDecoder<P> {
 
     fn finish(&mut self, out: &mut Vec<Record>) {
         self.scan(true, out);
+    }
+
+    fn stop(&mut self, out: &mut Vec<Record>) {
+        self.stopping = true;
+        self.scan(true, out);
+        self.stopping = false;
     }
 
     fn start_at(&mut self, offset: u64) {

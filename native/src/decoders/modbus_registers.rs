@@ -8,7 +8,7 @@
 //! response with values already seen formats nothing.
 
 use std::borrow::Cow;
-use std::rc::Rc;
+use std::sync::Arc;
 use std::sync::OnceLock;
 
 use crate::decoders::model::{Fields, Notes, Str, Value};
@@ -279,8 +279,8 @@ pub struct CellValue {
 /// pure caches: their contents never change what a frame says). Register values live in a
 /// direct-mapped cache: a polling loop finds its values there without hashing or formatting.
 pub struct Memo {
-    plans: FastMap<(u16, u16), Rc<Plan>>,
-    last_plan: Option<((u16, u16), Rc<Plan>)>,
+    plans: FastMap<(u16, u16), Arc<Plan>>,
+    last_plan: Option<((u16, u16), Arc<Plan>)>,
     cells: Vec<Option<CellValue>>,
 }
 
@@ -300,7 +300,7 @@ impl Default for Memo {
 }
 
 impl Memo {
-    pub fn plan(&mut self, wire_start: u16, count: u16) -> Rc<Plan> {
+    pub fn plan(&mut self, wire_start: u16, count: u16) -> Arc<Plan> {
         let key = (wire_start, count);
         if let Some((k, p)) = &self.last_plan {
             if *k == key {
@@ -313,7 +313,7 @@ impl Memo {
             if self.plans.len() >= PLAN_LIMIT {
                 self.plans.clear();
             }
-            let p = Rc::new(Plan::new(wire_start as i64, count as i64));
+            let p = Arc::new(Plan::new(wire_start as i64, count as i64));
             self.plans.insert(key, p.clone());
             p
         };

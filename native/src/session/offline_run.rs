@@ -7,22 +7,16 @@
 //! bytes (`next_batch`), which the Python binding hands on without looking inside.
 
 use crate::decoders::eg2_can::{CanMemos, Eg2CanDecoder};
-use crate::decoders::eg2_serial::Eg2SerialDecoder;
-use crate::decoders::framing::StreamDecoder;
 use crate::decoders::lint::TimingLinter;
-use crate::decoders::modbus_rtu::ModbusRtuDecoder;
-use crate::decoders::model::{CanFrame, Record, EG2_CAN, EG2_SERIAL, MODBUS_RTU};
+use crate::decoders::model::{CanFrame, Record, EG2_CAN};
 use crate::decoders::pairing::Pairer;
-use crate::decoders::registry::detect_protocol;
+use crate::session::byte_stage::ByteStream;
 use crate::sinks::writers::{make_writer, Format, RecordWriter, TextOptions};
 use crate::sources::candump::{BusNamer, CandumpReader};
 use crate::sources::capture::{check_readable, BytesReader};
 use std::io;
 use std::path::Path;
 use std::sync::Arc;
-
-/// Bytes of a stream looked at before choosing its protocol (analyzer/session/stage.py).
-pub const DETECT_BYTES: usize = 4096;
 
 /// CAN frames decoded per step of `next_batch` (about 140 KB of JSONL).
 const CAN_STEP: usize = 256;
@@ -163,95 +157,6 @@ fn reader_by_suffix(path: &Path) -> io::Result<ReaderKind> {
 enum Decoders {
     Bytes(ByteStream),
     Can(Box<CanBuses>),
-}
-
-/// The stream decoder of the protocol chosen.
-enum ByteDecoder {
-    Serial(Box<Eg2SerialDecoder>),
-    Modbus(Box<ModbusRtuDecoder>),
-}
-
-impl ByteDecoder {
-    fn get(&mut self) -> &mut dyn StreamDecoder {
-        match self {
-            ByteDecoder::Serial(d) => &mut **d,
-            ByteDecoder::Modbus(d) => &mut **d,
-        }
-    }
-}
-
-/// The one byte stream of a raw dump (`Decoding._streams` / `_undetected` for its one key).
-struct ByteStream {
-    bus: Arc<str>,
-    /// the protocol to use (None: detect)
-    protocol: Option<&'static str>,
-    dec: Option<ByteDecoder>,
-    /// chunks read before the protocol was chosen (replayed one by one, as the Python does)
-    undetected: Vec<Vec<u8>>,
-    undetected_len: usize,
-}
-
-impl ByteStream {
-    fn new_decoder(&mut self, protocol: &'static str) -> &mut ByteDecoder {
-        let mut dec = if protocol == MODBUS_RTU {
-            ByteDecoder::Modbus(Box::new(ModbusRtuDecoder::new(self.bus.clone())))
-        } else {
-            ByteDecoder::Serial(Box::new(Eg2SerialDecoder::new(self.bus.clone())))
-        };
-        dec.get().start_at(0);
-        self.dec.insert(dec)
-    }
-
-    /// `_choose`: the protocol the held sample shows, or the regular serial protocol.
-    fn choose(&self) -> &'static str {
-        let sample = self.undetected.concat();
-        detect_protocol(&sample).unwrap_or(EG2_SERIAL)
-    }
-
-    /// `_replay`: the held chunks into the decoder, in order.
-    fn replay(&mut self, out: &mut Vec<Record>) {
-        let chunks = std::mem::take(&mut self.undetected);
-        self.undetected_len = 0;
-        let dec = self.dec.as_mut().expect("a decoder was chosen").get();
-        for chunk in &chunks {
-            dec.feed(chunk, None, out);
-        }
-    }
-
-    /// `Decoding.feed` for one chunk of bytes, before the protocol is chosen: the chunk is
-    /// held. Once the protocol is chosen, the bytes held (this chunk included) are handed
-    /// back, to be fed as any other bytes (the decoders give the same records in any
-    /// chunking, so slices of them give what the Python's replay of whole chunks gives).
-    fn detect(&mut self, data: &[u8]) -> Option<Vec<u8>> {
-        self.undetected.push(data.to_vec());
-        self.undetected_len += data.len();
-        let protocol = match self.protocol {
-            Some(p) => p,
-            None if self.undetected_len < DETECT_BYTES => return None,
-            None => self.choose(),
-        };
-        self.new_decoder(protocol);
-        self.undetected_len = 0;
-        Some(std::mem::take(&mut self.undetected).concat())
-    }
-
-    /// Feed bytes to the chosen decoder.
-    fn feed(&mut self, data: &[u8], out: &mut Vec<Record>) {
-        let dec = self.dec.as_mut().expect("a decoder was chosen").get();
-        dec.feed(data, None, out);
-    }
-
-    /// `Decoding.finish` for the stream: choose if still undecided, then decide held bytes.
-    fn finish(&mut self, out: &mut Vec<Record>) {
-        if self.dec.is_none() && !self.undetected.is_empty() {
-            let protocol = self.protocol.unwrap_or_else(|| self.choose());
-            self.new_decoder(protocol);
-            self.replay(out);
-        }
-        if let Some(dec) = self.dec.as_mut() {
-            dec.get().finish(out);
-        }
-    }
 }
 
 /// One CAN decoder per bus name (`Decoding._can`), frames numbered across the file.
@@ -431,13 +336,10 @@ impl DecodeRun {
             }
             ReaderKind::Raw | ReaderKind::GzipRaw => {
                 let reader = BytesReader::open(path, kind == ReaderKind::GzipRaw)?;
-                let stream = ByteStream {
-                    bus: Arc::from(opts.bus.as_deref().unwrap_or("serial")),
-                    protocol: opts.protocol.filter(|&p| p != EG2_CAN), // `byte_protocol`
-                    dec: None,
-                    undetected: Vec::new(),
-                    undetected_len: 0,
-                };
+                let stream = ByteStream::new(
+                    Arc::from(opts.bus.as_deref().unwrap_or("serial")),
+                    opts.protocol.filter(|&p| p != EG2_CAN), // `byte_protocol`
+                );
                 (Input::Bytes(reader), Decoders::Bytes(stream))
             }
         };
