@@ -26,6 +26,7 @@ CORE_API = (
     "CycleSegmenter",
     "Tracker",
     "RecordBatch.column",
+    "RecordBatch.count",
     "RecordBatch.error_count",
     "RecordBatch.jsonl",
     "RecordBatch.messages",

@@ -45,6 +45,7 @@ class CyclesListener(Listener):
     of gripper ``device``, when given). ``count``: the cycles written."""
 
     wants_states = True
+    reads_whole_states = False  # a reading's fields: the ones its sample changed
 
     def __init__(self, output: CycleOutput, device: int | None = None) -> None:
         self.output = output
@@ -64,7 +65,7 @@ class CyclesListener(Listener):
         if self.output.t0 is None and len(records):
             self.output.t0 = records[0].t
         self._flush()  # the last batch's commands: it set no state
-        if self.native is not None:
+        if self.native is not None:  # the answers it keeps itself (``answer_of``)
             picked = self.native.candidates(records, _CODES)
         else:
             codes = records.column("code")
@@ -112,7 +113,7 @@ class CyclesListener(Listener):
         self.output.close()
 
     def _flush(self) -> None:
-        if not self.pending:
+        if not self.pending and not (self.native is not None and self.native.waiting):
             return
         if self.native is not None:
             self.native.feed(None, self.pending)

@@ -50,7 +50,7 @@ class HealthListener(Listener):
             return  # CAN records: the frames said it all
         if len(lines) == 1:  # a raw dump's one line takes its untimed records in bulk
             bus, health = next(iter(lines.items()))
-            if health.line.untimed and records.column("bus").count(bus) == len(records):
+            if health.line.untimed and records.count("bus", bus) == len(records):
                 health.line.add_untimed(records)
                 return
         for rec in records:

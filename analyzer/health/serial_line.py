@@ -100,11 +100,11 @@ class SerialLine:
         """``add_record`` of every record of a sequence (a ``RecordSequence`` or a native
         ``RecordBatch``) while the line is ``untimed``, in bulk: with no times there are no
         gaps, turnarounds or seconds, only the counts."""
-        kinds = records.column("kind")
-        frames = kinds.count(FRAME)
+        frames = records.count("kind", FRAME)
         if frames:
             self.frames += frames
-            self.protocol = self.protocol or records[kinds.index(FRAME)].protocol
+            if self.protocol is None:
+                self.protocol = records[records.column("kind").index(FRAME)].protocol
         if records.error_count():
             for rec in records.take(records.problems()):
                 if rec.errors:

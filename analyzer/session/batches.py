@@ -159,6 +159,10 @@ class RecordSequence(list[Record]):
         """``[getattr(rec, name) for rec in self]``."""
         return list(map(attrgetter(name), self))
 
+    def count(self, name: str, value: Any) -> int:
+        """How many records have ``getattr(rec, name) == value``."""
+        return self.column(name).count(value)
+
     def error_count(self) -> int:
         """How many records have errors."""
         return sum(1 for r in self if r.errors)

@@ -122,6 +122,7 @@ class FilteredListener(Listener):
         self.keep = keep
         self.kept = 0  # records passed on
         self.wants_states = inner.wants_states
+        self.reads_whole_states = inner.reads_whole_states
         self.wants_raw = inner.wants_raw
         self.reads_frame_batches = inner.reads_frame_batches
         self.label = getattr(inner, "label", type(inner).__name__)

@@ -29,6 +29,10 @@ class Listener(ABC):
 
     #: the session builds state samples only when some listener reads them
     wants_states: bool = False
+    #: a listener of states that reads only the fields each sample changed (``changed``,
+    #: ``series``) sets this False: when none reads more, the native tracker does not copy the
+    #: whole state into every sample (the other values of its samples are then left unset)
+    reads_whole_states: bool = True
     #: the session keeps raw input only when some listener reads it
     wants_raw: bool = False
     #: ``on_raw`` may be handed the native core's ``FrameBatch`` (a candump log read natively:

@@ -122,6 +122,9 @@ class Session:
             deadline = time.monotonic() + self.options.duration
         # samples cost a copy of the state per reading: made only when someone reads them
         self.tracker.samples = any(x.wants_states for x in self.listeners)
+        self.tracker.snapshots = any(
+            x.wants_states and x.reads_whole_states for x in self.listeners
+        )
         with _handled_by(self._on_signal), rare_gc():
             try:
                 self.source.start()  # a live source that never opens raises SourceError

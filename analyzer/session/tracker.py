@@ -90,13 +90,28 @@ class DeviceState:
         return derived(d)
 
 
+_UNSET: Final = dict.fromkeys(VALUE_KEYS)
+
+
+def _changes_only(values: dict[str, Any], changed: dict[str, Any]) -> dict[str, Any]:
+    """A sample's values without a snapshot: the fields it changed and the counters."""
+    kept = _UNSET.copy()
+    kept.update(changed)
+    for key in COUNTERS:
+        kept[key] = values[key]
+    return kept
+
+
 class Tracker:
     """Folds records into DeviceStates; ``update`` returns the sample a record made, if any.
-    ``samples=False``: fold only (no listener reads samples; the states are still kept)."""
+    ``samples=False``: fold only (no listener reads samples; the states are still kept).
+    ``snapshots=False``: a sample's values are only the fields it changed and the counters,
+    the rest None (no listener reads more: ``Listener.reads_whole_states``)."""
 
     def __init__(self, samples: bool = True) -> None:
         self.states: dict[tuple[str, int], DeviceState] = {}
         self.samples = samples
+        self.snapshots = True
 
     def update(self, rec: Record) -> StateSample | None:
         if rec.kind != FRAME or rec.device is None:
@@ -130,7 +145,8 @@ class Tracker:
         values.update(changed)
         if not self.samples:
             return None
-        return StateSample(rec.t, rec.bus, rec.device, st.protocol, rec.seq, changed, values.copy())
+        kept = values.copy() if self.snapshots else _changes_only(values, changed)
+        return StateSample(rec.t, rec.bus, rec.device, st.protocol, rec.seq, changed, kept)
 
     def update_many(self, records: list[Record]) -> list[StateSample]:
         """The samples of a batch of records, in order."""

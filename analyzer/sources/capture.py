@@ -36,7 +36,7 @@ from ..model import Item, SourceEvent
 from . import can_files, sniff
 from .compressed import compression_damage
 
-READ_SIZE = 1 << 16
+READ_SIZE = 1 << 14  # a raw dump's chunk: one batch of a session (source.CAPTURE_BATCH_BYTES)
 
 _CAN_LOG = "analyzer.sources.capture:CanLogReader"
 #: suffix (lower case, compound ones whole: ".log.gz") -> "module:Class" of its reader

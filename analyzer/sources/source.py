@@ -27,7 +27,7 @@ Batch = list[Item | SourceEvent]
 LIVE_BATCH_S = 0.05  # live: decode and show 20 times a second
 LIVE_BATCH_ITEMS = 2000  # and after a backlog, in steps short enough to keep views refreshed
 CAPTURE_BATCH_ITEMS = 2048  # captures: CAN frames (or byte chunks) per batch
-CAPTURE_BATCH_BYTES = 1 << 16  # ... or this many bytes of chunks
+CAPTURE_BATCH_BYTES = 1 << 14  # ... or this many bytes of chunks (records and samples in cache)
 # the words of a device that is not there (yet): --wait would wait for it
 ABSENT = ("no such", "is down")
 

@@ -8,7 +8,9 @@ use super::python_live::RecordBatch;
 use super::python_tracker::SampleBatch;
 use crate::cycles::rules::{Command, Decided};
 use crate::cycles::segmenter::{Event, Key, Reading, Segmenter, Values};
+use crate::decoders::model::RESPONSE;
 use crate::generated::cycles::FIELDS;
+use crate::generated::flags::{EXCEPTION_RESPONSE, WRITE_FAILED};
 use crate::session::tracker::{Sample, Slot};
 use pyo3::exceptions::PyTypeError;
 use pyo3::intern;
@@ -25,6 +27,8 @@ type Payload = Arc<Py<PyAny>>;
 #[derive(Default)]
 pub struct PyCycleSegmenter {
     inner: Segmenter<Payload>,
+    /// the answers `candidates` found, for the next `feed` (commands.py `answer_of`)
+    answers: Vec<(Key, Event<Payload>)>,
 }
 
 #[pymethods]
@@ -45,7 +49,8 @@ impl PyCycleSegmenter {
             Some(batch) => self.readings(batch.samples())?,
             None => Vec::new(),
         };
-        let mut events = Vec::with_capacity(commands.len());
+        let mut events = std::mem::take(&mut self.answers);
+        events.reserve(commands.len());
         for item in commands.iter() {
             let (bus, device, event): (String, i64, Bound<'_, PyTuple>) = item.extract()?;
             events.push(((Arc::from(bus), device), event_of(&event.get_item(3)?)?));
@@ -54,13 +59,37 @@ impl PyCycleSegmenter {
         Ok(())
     }
 
-    /// The indexes of the records of `records` (a `RecordBatch`) whose code is one of `codes`:
-    /// the listener's candidates (`commands.CODES`), without a Python object per record.
-    fn candidates(&self, records: PyRef<'_, RecordBatch>, codes: Vec<i64>) -> Vec<usize> {
-        let records = &records.records;
-        (0..records.len())
-            .filter(|&i| records[i].code.is_some_and(|c| codes.contains(&c)))
-            .collect()
+    /// The indexes of the records of `records` (a `RecordBatch`) whose code is one of `codes`
+    /// (`commands.CODES`) and that may carry a command, without a Python object per record;
+    /// the responses among them are the answers (commands.py `answer_of`), kept for the next
+    /// `feed`.
+    fn candidates(&mut self, records: PyRef<'_, RecordBatch>, codes: Vec<i64>) -> Vec<usize> {
+        let mut found = Vec::new();
+        for (i, rec) in records.records.iter().enumerate() {
+            if !rec.code.is_some_and(|c| codes.contains(&c)) {
+                continue;
+            }
+            if rec.direction != Some(RESPONSE) {
+                found.push(i);
+            } else if let (Some(request), Some(device)) = (rec.pair, rec.device) {
+                let answer = Event::Answer {
+                    seq: rec.seq,
+                    t: rec.t,
+                    request,
+                    refused: rec.flags.contains(&WRITE_FAILED)
+                        || rec.flags.contains(&EXCEPTION_RESPONSE),
+                    garbled: !rec.errors.is_empty(),
+                };
+                self.answers.push(((rec.bus.clone(), device), answer));
+            }
+        }
+        found
+    }
+
+    /// Whether answers wait for the next `feed`.
+    #[getter]
+    fn waiting(&self) -> bool {
+        !self.answers.is_empty()
     }
 
     /// The cycles that ended since the last call, in the order they ended.

@@ -530,6 +530,33 @@ impl RecordBatch {
         self.records.iter().filter(|r| !r.errors.is_empty()).count()
     }
 
+    /// How many records have `getattr(rec, name) == value` (`column(name).count(value)`),
+    /// without a list for the text attributes (bus, protocol, kind, direction).
+    fn count(&self, py: Python<'_>, name: &str, value: &Bound<'_, PyAny>) -> PyResult<usize> {
+        let Ok(text) = value.downcast::<PyString>() else {
+            return self
+                .column(py, name)?
+                .call_method1("count", (value,))?
+                .extract();
+        };
+        let text = text.to_str()?;
+        let same = |s: &str| s == text;
+        Ok(match name {
+            "bus" => self.records.iter().filter(|r| same(&r.bus)).count(),
+            "protocol" => self.records.iter().filter(|r| same(r.protocol)).count(),
+            "kind" => self.records.iter().filter(|r| same(r.kind)).count(),
+            "direction" => (self.records.iter())
+                .filter(|r| r.direction.is_some_and(same))
+                .count(),
+            _ => {
+                return self
+                    .column(py, name)?
+                    .call_method1("count", (value,))?
+                    .extract()
+            }
+        })
+    }
+
     /// The indexes of the records with errors or warnings.
     fn problems(&self) -> Vec<usize> {
         self.records

@@ -185,6 +185,17 @@ impl PyTracker {
         self.tracker().samples = samples.0;
     }
 
+    /// Whether a sample holds the whole state (else the fields it changed and the counters).
+    #[getter]
+    fn snapshots(&self) -> bool {
+        self.tracker().snapshots
+    }
+
+    #[setter]
+    fn set_snapshots(&self, snapshots: Truthy) {
+        self.tracker().snapshots = snapshots.0;
+    }
+
     /// Fold each record of the batch in order (`Tracker.update`); the samples they made.
     ///
     /// The GIL is kept: a fold costs a fraction of a microsecond per record, and the batch is

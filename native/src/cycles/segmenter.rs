@@ -128,35 +128,30 @@ impl<P: Clone> Segmenter<P> {
         if !readings.is_sorted_by_key(|r| r.seq) {
             readings.sort_by_key(|r| r.seq);
         }
-        let mut last: FastMap<usize, Mark> = FastMap::default();
+        // the last frame of each gripper in this batch, by gripper number (a few grippers)
+        let mut last: Vec<Option<Mark>> = vec![None; self.grippers.len()];
         let mut commands = targeted.iter().peekable();
         for r in &readings {
             while let Some((g, event)) = commands.next_if(|(_, e)| e.seq() <= r.seq) {
                 self.event(*g, event);
-                last.insert(
-                    *g,
-                    Mark {
-                        seq: event.seq(),
-                        t: event.t(),
-                    },
-                );
+                last[*g] = Some(Mark {
+                    seq: event.seq(),
+                    t: event.t(),
+                });
             }
             self.reading(r.gripper, r.seq, r.t, &r.values, r.kind);
-            last.insert(r.gripper, Mark { seq: r.seq, t: r.t });
+            last[r.gripper] = Some(Mark { seq: r.seq, t: r.t });
         }
         for (g, event) in commands {
             self.event(*g, event);
-            last.insert(
-                *g,
-                Mark {
-                    seq: event.seq(),
-                    t: event.t(),
-                },
-            );
+            last[*g] = Some(Mark {
+                seq: event.seq(),
+                t: event.t(),
+            });
         }
-        for (g, mark) in last {
-            if let Some(w) = self.grippers[g].watch.as_mut() {
-                w.end = Some(mark); // the last frame of the gripper's this batch
+        for (g, mark) in last.into_iter().enumerate() {
+            if let (Some(mark), Some(w)) = (mark, self.grippers[g].watch.as_mut()) {
+                w.end = Some(mark);
             }
         }
     }

@@ -100,6 +100,23 @@ pub struct Values {
     pub unanswered: i64,
 }
 
+impl Values {
+    /// A sample's values without a snapshot (`_changes_only`): the fields it changed and the
+    /// counters.
+    fn changes_only(&self, changed: Changed) -> Values {
+        let mut kept = Values {
+            frames: self.frames,
+            errors: self.errors,
+            unanswered: self.unanswered,
+            ..Values::default()
+        };
+        for field in changed.iter() {
+            kept.slots[field] = self.slots[field].clone();
+        }
+        kept
+    }
+}
+
 impl Clone for Values {
     /// A sample's snapshot: one per reading, so the numbers are copied without the generic
     /// array clone's per-element dispatch (a third of a tracker's time with samples).
@@ -190,9 +207,11 @@ impl Fold<'_> {
     }
 }
 
-/// Folds records into `DeviceState`s (`Tracker`). `samples` false: fold only.
+/// Folds records into `DeviceState`s (`Tracker`). `samples` false: fold only; `snapshots`
+/// false: a sample's values are the fields it changed and the counters, the rest unset.
 pub struct Tracker {
     pub samples: bool,
+    pub snapshots: bool,
     /// bus names seen, so a state's key is two integers; the last one matched first (a
     /// decoder gives all its records the same `Arc`)
     buses: Vec<Arc<str>>,
@@ -206,6 +225,7 @@ impl Tracker {
     pub fn new(samples: bool) -> Self {
         Tracker {
             samples,
+            snapshots: true,
             buses: Vec::new(),
             last_bus: 0,
             index: FastMap::default(),
@@ -247,7 +267,11 @@ impl Tracker {
             protocol: st.protocol,
             seq: rec.seq,
             changed,
-            values: st.values.clone(),
+            values: if self.snapshots {
+                st.values.clone()
+            } else {
+                st.values.changes_only(changed)
+            },
         })
     }
 
