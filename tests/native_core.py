@@ -26,7 +26,7 @@ CORE_API = (
     "CycleSegmenter",
     "Tracker",
     "RecordBatch.column",
-    "RecordBatch.count",
+    "RecordBatch.count_of",
     "RecordBatch.error_count",
     "RecordBatch.jsonl",
     "RecordBatch.messages",

@@ -49,9 +49,9 @@ class HealthListener(Listener):
         if not lines:
             return  # CAN records: the frames said it all
         if len(lines) == 1:  # a raw dump's one line takes its untimed records in bulk
-            bus, health = next(iter(lines.items()))
-            if health.line.untimed and records.count("bus", bus) == len(records):
-                health.line.add_untimed(records)
+            bus, only = next(iter(lines.items()))
+            if only.line.untimed and records.count_of("bus", bus) == len(records):
+                only.line.add_untimed(records)
                 return
         for rec in records:
             health = lines.get(rec.bus)

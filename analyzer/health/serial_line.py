@@ -100,7 +100,7 @@ class SerialLine:
         """``add_record`` of every record of a sequence (a ``RecordSequence`` or a native
         ``RecordBatch``) while the line is ``untimed``, in bulk: with no times there are no
         gaps, turnarounds or seconds, only the counts."""
-        frames = records.count("kind", FRAME)
+        frames = records.count_of("kind", FRAME)
         if frames:
             self.frames += frames
             if self.protocol is None:

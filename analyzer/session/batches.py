@@ -159,7 +159,7 @@ class RecordSequence(list[Record]):
         """``[getattr(rec, name) for rec in self]``."""
         return list(map(attrgetter(name), self))
 
-    def count(self, name: str, value: Any) -> int:
+    def count_of(self, name: str, value: Any) -> int:
         """How many records have ``getattr(rec, name) == value``."""
         return self.column(name).count(value)
 

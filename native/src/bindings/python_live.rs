@@ -532,7 +532,7 @@ impl RecordBatch {
 
     /// How many records have `getattr(rec, name) == value` (`column(name).count(value)`),
     /// without a list for the text attributes (bus, protocol, kind, direction).
-    fn count(&self, py: Python<'_>, name: &str, value: &Bound<'_, PyAny>) -> PyResult<usize> {
+    fn count_of(&self, py: Python<'_>, name: &str, value: &Bound<'_, PyAny>) -> PyResult<usize> {
         let Ok(text) = value.downcast::<PyString>() else {
             return self
                 .column(py, name)?
