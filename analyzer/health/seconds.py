@@ -44,9 +44,16 @@ SEVERITY: Final = (
     BAD_CHECKSUM, TRUNCATED, GARBAGE, CLOSE_FRAMES,
 )  # fmt: skip
 _RANK: Final = {key: rank for rank, key in enumerate(SEVERITY)}
+_RANK_OF_WORDS: Final = {_WORDS.get(key, key): rank for key, rank in _RANK.items()}
 #: the controller states, the worst last
 STATES: Final = (ERROR_ACTIVE, ERROR_WARNING, ERROR_PASSIVE, BUS_OFF)
 _WORSE: Final = {state: rank for rank, state in enumerate(STATES)}
+
+
+def severity(worst: str) -> int:
+    """The rank of an event as a ``HealthSecond`` names it (``worst``): 0 the most serious
+    (``SEVERITY``), words it does not know after all it knows."""
+    return _RANK_OF_WORDS.get(worst, len(SEVERITY))
 
 
 @dataclass(frozen=True, slots=True)

@@ -114,6 +114,18 @@ def test_a_second_is_shown_with_its_load_frames_errors_state_and_event() -> None
     assert "90 fr/s 2 err/s" in short and len(short) < len(text), short
 
 
+def test_the_event_shown_is_the_worst_recent_one() -> None:
+    """A lesser event does not hide a worse one of the last minute; a minute later it does."""
+    line = BusHealthLine("can0")
+    for second, worst in ((10, "bus off"), (12, "no ACK"), (20, "error passive")):
+        line.add(HealthSecond("can0", "can", second, 90, 500, 1.0, 1, "bus_off", worst), True)
+    assert "bus off 11 s ago" in health_text(line, now=21.0, live=True).plain
+    line.add(HealthSecond("can0", "can", 30, 90, 500, 1.0, 1, "bus_off", "bus off"), True)
+    assert "bus off 1 s ago" in health_text(line, now=31.0, live=True).plain
+    line.add(HealthSecond("can0", "can", 95, 90, 500, 1.0, 1, "error_active", "no ACK"), True)
+    assert "no ACK 1 s ago" in health_text(line, now=96.0, live=True).plain
+
+
 def test_every_live_bus_has_its_load_and_frames_per_second() -> None:
     async def scenario() -> None:
         with DemoRig() as rig:

@@ -1,10 +1,11 @@
 """The health lines: one line per bus (CANalyzer's and PCAN-View's bus statistics, in one line):
 the load of its latest whole second in percent of its bit rate or baud, and the highest of any
 second the bus covered whole; its frames and errors in that second; a CAN controller's state
-when it is not error-active; the latest event of the bus in words and how long ago it was
-(on the capture's clock, or the wall clock live). The figures are the health package's
-(``HealthSecond``), never computed here. A bus whose frames have no times (a raw dump) says so
-rather than show a load or a rate; a live bus that has gone quiet says for how long."""
+when it is not error-active; the worst event of the bus's last ``RECENT_S`` seconds in words
+and how long ago it was (on the capture's clock, or the wall clock live). The figures are the
+health package's (``HealthSecond``), never computed here. A bus whose frames have no times (a
+raw dump) says so rather than show a load or a rate; a live bus that has gone quiet says for
+how long."""
 
 from __future__ import annotations
 
@@ -19,11 +20,13 @@ from textual.widgets import Static
 from decoders.can_errors import ERROR_ACTIVE
 
 from ...health.bus import NO_TIMING
+from ...health.seconds import severity
 
 if TYPE_CHECKING:
     from ...health.seconds import HealthSecond
 
 QUIET_S: Final = 2.0  # a live bus not heard for longer is said to be quiet
+RECENT_S: Final = 60  # an event is shown until a worse one comes, or for this long
 STYLE_BUS: Final = Style(bold=True)
 STYLE_DIM: Final = Style(dim=True)
 STYLE_BAD: Final = Style(color="red", bold=True)
@@ -38,7 +41,8 @@ NARROW: Final = 100
 class BusHealthLine:
     """What one bus's line shows. ``peak``: the highest load of a second the bus covered whole
     (its first second, and its last one at the end, are partly outside its frames);
-    ``event``: the latest second with an event, and the event in words; ``whole``: the bus's
+    ``event``: the second of the worst recent event, and the event in words (a later one as
+    serious or worse, or any once it is ``RECENT_S`` old, takes its place); ``whole``: the bus's
     figures over the whole session, once it is over (``stats --format json``'s)."""
 
     bus: str
@@ -56,8 +60,13 @@ class BusHealthLine:
         if whole and row.second != self.first and load is not None:
             self.peak = load if self.peak is None else max(self.peak, load)
         self.last = row
-        if row.worst is not None:
+        if row.worst is not None and self._replaces(row.second, row.worst):
             self.event = (row.second, row.worst)
+
+    def _replaces(self, second: int, worst: str) -> bool:
+        if self.event is None or second - self.event[0] >= RECENT_S:
+            return True
+        return severity(worst) <= severity(self.event[1])
 
 
 def ago(seconds: float) -> str:
