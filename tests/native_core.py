@@ -21,6 +21,7 @@ CORE_API = (
     "DecodeRun",
     "ArrowRun",
     "Unsupported",
+    "ByteStage",
     "CandumpFrames",
     "CanStage",
     "CycleSegmenter",
@@ -40,6 +41,7 @@ CORE_API = (
     "SampleBatch.series",
     "can_raw_messages",
     "can_seconds",
+    "detect_protocol",
 )
 
 

@@ -215,8 +215,9 @@ def add_replay_arguments(parser: argparse.ArgumentParser, unpaced: str, same: st
         "--engine",
         choices=ENGINES,
         default="auto",
-        help="the session's decoding: auto (the native core for CAN captures where it is built, "
-        "else the Python decoders; default), python, or native (a usage error where it cannot "
+        help="the session's decoding: auto (the native core for CAN captures and raw dumps "
+        "where it is built, else the Python decoders; default), python, or native (a usage "
+        "error where it cannot "
         f"decode the capture). {same}",
     )
 

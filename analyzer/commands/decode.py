@@ -84,8 +84,9 @@ def add_subparser(sub: Any) -> None:
         choices=ENGINES,
         default="auto",
         help="auto: the native core where it applies (candump logs and raw dumps to jsonl, "
-        "csv, text or parquet, byte-identical output; other CAN captures are read in Python "
-        "and decoded natively), else Python (default); python: the Python decoders (and "
+        "csv, text or parquet, byte-identical output; other CAN captures, and raw dumps "
+        "replayed with --speed, are read in Python and decoded natively), else Python "
+        "(default); python: the Python decoders (and "
         "--jobs); native: the native core, a usage error where it cannot be used. "
         "'eg2scope --version' says whether the native core is built",
     )

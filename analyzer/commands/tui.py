@@ -73,9 +73,10 @@ def add_subparser(sub: Any) -> None:
         "--engine",
         choices=ENGINES,
         default="auto",
-        help="auto: the native core for CAN input where it is built, else Python (default); "
-        "python: the Python decoders and tracker; native: the native core (a usage error "
-        "where the input is not CAN or the core is not built)",
+        help="auto: the native core for CAN input and raw dumps where it is built, else "
+        "Python (default); python: the Python decoders and tracker; native: the native core "
+        "(a usage error for several byte streams, as live serial taps and their recordings, "
+        "or where the core is not built)",
     )
     parser.add_argument(
         "--keep",

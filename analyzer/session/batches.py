@@ -35,7 +35,8 @@ from .tracker import Tracker
 
 
 class SessionDecoding(Protocol):
-    """What a session asks of its decoding (``PythonDecoding`` or ``NativeCanDecoding``): records
+    """What a session asks of its decoding (``PythonDecoding``, ``NativeCanDecoding`` or
+    ``NativeByteDecoding``): records
     as ``RecordSequence``s, or as the native core's ``RecordBatch``es, which behave alike where
     the session uses them (``len``, iteration, indexing, ``+=`` of another, the bulk methods)."""
 
@@ -54,6 +55,18 @@ def native_session_available() -> bool:
     return _native is not None
 
 
+def native_input(
+    kind: str,
+    positional: bool,
+    per_bus: dict[str, str] | None = None,
+    byte_time_s: dict[str, float] | None = None,
+) -> bool:
+    """Whether the native core decodes a session on this input: CAN, or one byte stream (a
+    single-stream capture: a raw dump) with no protocols named per bus and no byte times."""
+    one_stream = kind == "bytes" and positional and not per_bus and not byte_time_s
+    return kind == "can" or one_stream
+
+
 def session_engine(
     engine: str,
     kind: str,
@@ -68,8 +81,7 @@ def session_engine(
     ValueError where it cannot be used), else the Python ones."""
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; choose from {', '.join(ENGINES)}")
-    one_stream = kind == "bytes" and positional and not per_bus and not byte_time_s
-    native = (kind == "can" or one_stream) and native_session_available()
+    native = native_input(kind, positional, per_bus, byte_time_s) and native_session_available()
     if engine == "native" and not native:
         why = (
             "it is not built"

@@ -6,8 +6,9 @@ writes byte-identical output (tests/native/ and tests/analyzer/ check it); they 
    ``_native.ArrowRun`` Parquet's columns;
 2. parts on every idle core in Python, for large raw dumps and candump logs to JSONL or CSV
    (parallel.decode_in_parallel; ``--jobs``);
-3. one session: on the native core's ``CanStage`` for CAN input where the core is built, else
-   on the Python decoding stage (batches.session_engine, by ``CaptureOptions.engine``)."""
+3. one session: on the native core's ``CanStage`` for CAN input and ``ByteStage`` for a raw
+   dump (replayed with ``--speed``) where the core is built, else on the Python decoding stage
+   (batches.session_engine, by ``CaptureOptions.engine``)."""
 
 from __future__ import annotations
 

@@ -17,42 +17,27 @@ Other CAN captures (PCAN traces, python-can's formats, CAN recordings) are read 
 decoded by the session, natively where the core is built
 (analyzer/session/batches.py); a session on a
 candump log (``plot``, ``tui``) gets its frames from the core's reader (``candump_frames``)
-when it decodes natively and no listener wants the raw items. Byte streams of
-recordings, live taps and the TUI stay with the Python decoders, the readable reference.
+when it decodes natively and no listener wants the raw items. A session on a raw dump
+(``--speed``, ``stats``, ``cycles``, ``plot``, the TUI) decodes its one byte stream natively
+too; several byte streams (recordings of serial lines, live taps) stay with the Python
+decoders, the readable reference.
 ``--engine python`` forces the Python engine, ``--engine native`` the native one: the core's
-own decode where it applies, the session's native decoding for the other CAN captures, a usage
-error saying why for the rest.
+own decode where it applies, the session's native decoding for the other CAN captures and raw
+dumps, a usage error saying why for the rest.
 """
 
 from __future__ import annotations
 
-import importlib
 import os
-from types import ModuleType
 from typing import Any
 
+from ..extension import WHY_NOT, _native  # the core, for the modules that ask here
 from ..sources.can_files import CandumpReader
 from ..sources.capture import CanLogReader, CaptureReader, GzipBytesReader, RawBytesReader
 
 ENGINES = ("auto", "python", "native")
 FORMATS = ("jsonl", "csv", "text")
 _I64_MAX = (1 << 63) - 1
-
-CORE = "analyzer._native"  # the extension's name (pyproject.toml: setuptools-rust target)
-_native: ModuleType | None
-try:
-    _native = importlib.import_module(CORE)
-except ModuleNotFoundError as exc:
-    _native = None
-    if exc.name == CORE:
-        WHY_NOT = "not built: no Rust toolchain at install time, or its build failed"
-    else:
-        WHY_NOT = f"not loadable: {exc}"
-except ImportError as exc:  # built, but for another platform, or damaged
-    _native = None
-    WHY_NOT = f"not loadable: {exc}"
-else:
-    WHY_NOT = ""
 
 
 def available() -> bool:

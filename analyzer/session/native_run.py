@@ -17,7 +17,7 @@ from typing import IO, Any
 from ..errors import EXIT_DAMAGED, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..outfile import OutputError
 from ..sources.capture import CaptureReader
-from .batches import native_session_available
+from .batches import native_input, native_session_available
 from .capture import CaptureOptions, DecodeOutput, ProgressListener, byte_protocol
 from .engine import _native, ineligible
 from .session import signals_as_interrupt
@@ -62,8 +62,9 @@ def open_for(opts: CaptureOptions, output: DecodeOutput, reader: CaptureReader) 
 
 def _session_decodes(reader: CaptureReader) -> bool:
     """Whether the session decodes this capture natively when the core's own decode cannot:
-    CAN frames read in Python (analyzer/session/batches.py `session_engine`)."""
-    return reader.kind == "can" and native_session_available()
+    CAN frames read in Python, a raw dump replayed with --speed (analyzer/session/batches.py
+    `session_engine`)."""
+    return native_input(reader.kind, reader.single_stream) and native_session_available()
 
 
 def _text_stdout_differs() -> str:

@@ -48,7 +48,8 @@ class SessionOptions:
     stream); ``per_bus``: fixed protocols of named buses; ``byte_time_s``: seconds per byte of
     named serial buses (10 bits / baud), to time frames inside a read; ``duration``: stop after
     this many seconds of wall time (None: run until the source ends or Ctrl-C); ``engine``:
-    "auto" (the native core for CAN input where it is built), "python" or "native"
+    "auto" (the native core for CAN input and one byte stream where it is built), "python" or
+    "native"
     (analyzer/session/batches.py)."""
 
     protocol: str | None = None

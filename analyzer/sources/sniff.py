@@ -18,6 +18,7 @@ from pathlib import Path
 
 from decoders.registry import detect_protocol
 
+from ..extension import _native
 from . import candump
 
 HEAD_SIZE = candump.HEAD_SIZE
@@ -104,8 +105,6 @@ def sniff_head(data: bytes) -> str | None:
 def _detect_protocol(data: bytes) -> str | None:
     """``detect_protocol``, by the native core when it is built (the same answer: tests/native
     checks it; the Python decoders take a third of a second over a 64 KiB head)."""
-    from ..session.engine import _native  # not at import: the engine imports this module's users
-
     return detect_protocol(data) if _native is None else _native.detect_protocol(data)
 
 

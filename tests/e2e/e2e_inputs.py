@@ -80,20 +80,21 @@ def record_live_plot(*buses: str) -> Callable[[Path], list[str]]:
 @dataclass(frozen=True)
 class InputKind:
     """One row of the matrix. ``make`` writes the file; ``record`` instead gives the command
-    line of the eg2scope process that records it. ``can``: CAN frames only, so sessions decode
-    it natively where the core is built (docs/architecture.md)."""
+    line of the eg2scope process that records it. ``native``: sessions decode it natively
+    where the core is built: CAN frames only, or a raw dump's one byte stream
+    (docs/architecture.md)."""
 
     id: str
     file: str
-    can: bool
+    native: bool
     make: Callable[[Path], None] | None = None
     record: Callable[[Path], list[str]] | None = None
 
 
 ALL_BUSES = ("serial", "modbus", "can")
 KINDS = (
-    InputKind("serial-dump", "serial_session.bin", False, make=copy_capture("serial_session.bin")),
-    InputKind("modbus-dump", "modbus_session.bin", False, make=copy_capture("modbus_session.bin")),
+    InputKind("serial-dump", "serial_session.bin", True, make=copy_capture("serial_session.bin")),
+    InputKind("modbus-dump", "modbus_session.bin", True, make=copy_capture("modbus_session.bin")),
     InputKind("candump", "can_pick_place.log", True, make=copy_capture("can_pick_place.log")),
     InputKind("asc", "can_pick_place.asc", True, make=rewrite_candump),
     InputKind("blf", "can_pick_place.blf", True, make=rewrite_candump),
@@ -105,7 +106,7 @@ LIVE_DEMO = "live-demo"  # the simulated grippers, live: not a file
 LIVE_PLOT = InputKind(LIVE_DEMO, "live.mcap", False, record=record_live_plot(*ALL_BUSES))
 BY_ID = {k.id: k for k in (*KINDS, LIVE_PLOT)}
 IDS = [k.id for k in KINDS]
-CAN_IDS = [k.id for k in KINDS if k.can]
+NATIVE_IDS = [k.id for k in KINDS if k.native]
 
 
 class InputFolder:

@@ -15,12 +15,12 @@ from typing import Any
 import orjson
 import pytest
 from e2e_checks import Prefetch, Ran, eg2scope, eg2scope_runs, skip_unless_native
-from e2e_inputs import CAN_IDS, IDS
+from e2e_inputs import IDS, NATIVE_IDS
 
 from analyzer.cli import main
 from analyzer.cycles.model import KEYS, OUTCOMES, QUANTITIES
 
-SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in NATIVE_IDS]
 BROADCAST = {"eg2-serial": 255, "modbus-rtu": 0, "eg2-can": 16383}
 SERIAL_MOTIONS = {0x10, 0x11, 0x18, 0x54}  # catch, release, continuous catch, seek
 REGISTER_WRITES = {"modbus-rtu": {6, 16}, "eg2-can": {1}}

@@ -24,12 +24,12 @@ from e2e_checks import (
     recorded_openings,
     skip_unless_native,
 )
-from e2e_inputs import CAN_IDS, IDS, LIVE_PLOT
+from e2e_inputs import IDS, LIVE_PLOT, NATIVE_IDS
 from plot_checks import check_bus_health, check_cycles
 
 from analyzer.cli import main
 
-SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in NATIVE_IDS]
 
 
 def check_plot(rrd_path: Path, kind: str, reference) -> None:

@@ -19,11 +19,11 @@ from e2e_checks import (
     stats_of,
     stats_view,
 )
-from e2e_inputs import CAN_IDS, IDS, KINDS
+from e2e_inputs import IDS, KINDS, NATIVE_IDS
 
 from analyzer.cli import main
 
-SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in NATIVE_IDS]
 RAW_DUMPS = {k.id for k in KINDS if k.file.endswith(".bin")}  # no times at all
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import orjson
 import pytest
 from e2e_checks import eg2scope, force_session_engine, seq_names, skip_unless_native
-from e2e_inputs import CAN_IDS, IDS
+from e2e_inputs import IDS, NATIVE_IDS
 from textual.worker import Worker, WorkerState
 
 from analyzer.cli import build_parser
@@ -29,7 +29,7 @@ from analyzer.tui.launch import capture_plan
 from analyzer.tui.widgets.cycles import CyclesPanel
 from analyzer.tui.widgets.health import HealthLines
 
-SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in CAN_IDS]
+SESSION_CELLS = [(k, "python") for k in IDS] + [(k, "native") for k in NATIVE_IDS]
 SIZE = (200, 50)
 TIMEOUT_S = 30.0
 

@@ -18,6 +18,9 @@ from health_helpers import cli_buses
 
 from analyzer.health.listener import HealthListener
 from analyzer.health.rates import BusRates
+from analyzer.health.serial_line import SerialLine
+from analyzer.model import Item
+from analyzer.session.batches import session_engine
 from analyzer.session.listener import Listener
 from analyzer.session.session import live_session
 from analyzer.sim.endpoints import ModbusGripperServer, SerialGripperServer
@@ -179,3 +182,31 @@ def test_a_raw_dump_has_counts_and_no_timing() -> None:
     assert bus["frames_per_s"] is None and bus["gaps_ms"]["count"] == 0
     assert bus["turnaround_ms"] == [] and bus["latency_timer"] is None
     assert bus["error_frames"]["total"] > 0  # the sample's damage: a bad checksum, garbage
+
+
+@pytest.mark.parametrize("engine", ["python", "native"])
+@pytest.mark.parametrize("name", ["serial_session.bin", "modbus_session.bin"])
+def test_a_raw_dumps_records_in_bulk_count_as_one_by_one(name: str, engine: str) -> None:
+    """``add_untimed`` (a raw dump's records a batch at a time, a ``RecordSequence`` or the
+    native core's ``RecordBatch``) counts what ``add_record`` counts record by record."""
+    data = (ROOT / "captures" / name).read_bytes()
+    data = data[:300] + b"\x00\xeb\x90\x01" + data[300:] + data[:7]  # garbage, a frame cut short
+    items = [Item("serial", Chunk(data[i : i + 100])) for i in range(0, len(data), 100)]
+    decoding, _ = session_engine(engine, "bytes", True)
+    batches = [decoding.feed_items(items[i : i + 3]) for i in range(0, len(items), 3)]
+    batches.append(decoding.finish())
+    bulk, one = SerialLine(115_200), SerialLine(115_200)
+    for line in (bulk, one):
+        for item in items:
+            line.add_read(item.stream, item.payload)
+    for records in batches:
+        assert bulk.untimed
+        bulk.add_untimed(records)
+        for rec in records:
+            one.add_record(rec)
+
+    def counts(line: SerialLine) -> tuple[Any, ...]:
+        return (line.protocol, line.frames, line.errors, line.error_counts, line.bytes)
+
+    assert counts(bulk) == counts(one)
+    assert bulk.frames > 20 and bulk.errors > 2 and bulk.error_counts["truncated"] == 1

@@ -73,18 +73,43 @@ def test_without_the_extension_everything_is_pure_python(tmp_path: Path) -> None
     assert "--engine native: the native core is not built" in res.stderr
 
 
+def serial_recording(path: Path) -> Path:
+    """A recording of one serial line (the sample dump's bytes): several byte streams to a
+    session, which the native engine does not decode."""
+    from test_native_session import Batches
+    from test_native_session import run as run_session
+
+    from analyzer.model import Item
+    from analyzer.recording.recorder import McapRecorder
+    from decoders.model import Chunk
+
+    class SerialTap(Batches):
+        kind = "bytes"
+
+    chunk = Chunk(SERIAL.read_bytes(), 1_700_000_000.0)
+    run_session(SerialTap([[Item("rs232", chunk)]]), "python", McapRecorder(path))
+    return path
+
+
 @needs_native
 def test_engine_native_refuses_what_it_cannot_do(tmp_path: Path) -> None:
     asc = tmp_path / "x.asc"
     asc.write_text("date Mon Nov 23 00:00:00 2026\nbase hex  timestamps absolute\n")
-    for argv, words in [([str(SERIAL), "--speed", "1000"], "--speed")]:
+    recording = str(serial_recording(tmp_path / "serial.mcap"))
+    for argv, words in [
+        ([recording], "does not read this kind of capture"),
+        ([recording, "--speed", "1000"], "--speed"),
+    ]:
         code, _, err = run("decode", *argv, "--engine", "native")
         assert code == 2, err
         assert "--engine native: " in err and words in err
         assert "Traceback" not in err
     # CAN captures the core does not read are read in Python and decoded by the session's
-    # native decoding (tests/sources/test_third_party_captures.py compares the engines)
+    # native decoding (tests/sources/test_third_party_captures.py compares the engines), and a
+    # raw dump replayed with --speed by its native decoding of one byte stream
+    # (test_byte_session.py compares them)
     assert run("decode", str(asc), "--engine", "native")[0] == 0
+    assert run("decode", str(SERIAL), "--speed", "1000", "--engine", "native")[0] == 0
 
 
 def test_engine_python_and_usage_errors_come_first(tmp_path: Path) -> None:
@@ -118,13 +143,19 @@ def test_auto_uses_the_native_core_where_it_applies(
 
 
 @needs_native
-def test_unsupported_falls_back_to_python(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(native_run, "open_run", lambda *a: None)  # the core says Unsupported
+def test_unsupported_falls_back_to_a_session(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the core's own run does not take a capture, a session decodes it: for a raw
+    dump, natively (``--engine native`` too); the same bytes."""
     out = tmp_path / "o.jsonl"
+    assert run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out), "--engine", "python")[0] == 0
+    want = out.read_text()
+    monkeypatch.setattr(native_run, "open_run", lambda *a: None)  # the core says Unsupported
     assert run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out))[0] == 0
-    assert out.read_bytes().count(b"\n") > 10
-    code, _, err = run("decode", str(SERIAL), "-o", str(out), "--engine", "native")
-    assert code == 2 and "does not support" in err
+    assert out.read_text() == want
+    code, _, err = run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out), "--engine", "native")
+    assert code == 0 and out.read_text() == want, err
 
     from analyzer import _native  # type: ignore[attr-defined]
 
@@ -132,9 +163,15 @@ def test_unsupported_falls_back_to_python(tmp_path: Path, monkeypatch: pytest.Mo
         raise _native.Unsupported("x.bin: not this one")
 
     monkeypatch.setattr(native_run, "open_run", unsupported)
-    assert run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out))[0] == 0  # Python did it
+    assert run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out))[0] == 0  # a session did it
+    code, _, err = run("decode", str(SERIAL), "-f", "jsonl", "-o", str(out), "--engine", "native")
+    assert code == 0 and out.read_text() == want, err
+    monkeypatch.setattr(native_run, "_session_decodes", lambda reader: False)  # nor a session
     code, _, err = run("decode", str(SERIAL), "-o", str(out), "--engine", "native")
     assert code == 2 and "--engine native: x.bin: not this one; use --engine python" in err
+    monkeypatch.setattr(native_run, "open_run", lambda *a: None)
+    code, _, err = run("decode", str(SERIAL), "-o", str(out), "--engine", "native")
+    assert code == 2 and "does not support" in err
 
 
 @needs_native
@@ -227,10 +264,12 @@ def test_a_file_name_that_is_not_utf8_goes_to_python(tmp_path: Path) -> None:
     name = os.fsdecode(b"\xffcut.bin.gz")
     packed = gzip.compress(SERIAL.read_bytes())
     (tmp_path / name).write_bytes(packed[: len(packed) // 2])
-    assert "not a UTF-8 file name" in run("decode", str(tmp_path / name), "--engine", "native")[2]
-    code, _, err = run("decode", str(tmp_path / name), "-o", str(tmp_path / "o"))
-    assert (
-        code == 3
-        and "\\udcffcut.bin.gz: the compressed file is cut short"
-        in err.encode("utf-8", "backslashreplace").decode()
-    )
+    for engine in ("auto", "native"):  # native: the session's native decoding
+        code, _, err = run(
+            "decode", str(tmp_path / name), "-o", str(tmp_path / "o"), "--engine", engine
+        )
+        assert (
+            code == 3
+            and "\\udcffcut.bin.gz: the compressed file is cut short"
+            in err.encode("utf-8", "backslashreplace").decode()
+        ), err

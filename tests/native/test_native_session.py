@@ -1,6 +1,6 @@
 """A session on CAN input decodes and tracks with the native core
 (``analyzer/session/batches.py``): the same listener calls, records, state samples, JSONL and
-MCAP messages as with the Python engine.
+MCAP messages as with the Python engine (a session on one byte stream: test_byte_session.py).
 Each test runs one input through a session twice, ``engine="python"`` and ``engine="native"``."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from native_core import needs_native
 
 from analyzer.model import ERROR, Item, SourceEvent, StateSample
 from analyzer.recording.recorder import McapRecorder
-from analyzer.session.batches import NativeCanDecoding, session_engine
+from analyzer.session.batches import NativeByteDecoding, NativeCanDecoding, session_engine
 from analyzer.session.listener import Listener
 from analyzer.session.session import Session, SessionOptions
 from analyzer.session.stage import Decoding
@@ -111,15 +111,28 @@ def mcap_messages(path: Path) -> list[tuple[str, int, bytes]]:
 
 
 @needs_native
-def test_auto_uses_the_native_core_for_can_input_only() -> None:
+def test_auto_uses_the_native_core_for_can_input_and_one_byte_stream() -> None:
     decoding, tracker = session_engine("auto", "can", False)
     assert isinstance(decoding, NativeCanDecoding)
     assert type(tracker).__module__ == "analyzer._native"
-    for kind in ("bytes", "mixed"):
-        assert isinstance(session_engine("auto", kind, False)[0], Decoding)
-        with pytest.raises(ValueError, match="the input is not CAN"):
-            session_engine("native", kind, False)
+    decoding, tracker = session_engine("auto", "bytes", True, "modbus-rtu")  # a raw dump
+    assert isinstance(decoding, NativeByteDecoding)
+    assert type(tracker).__module__ == "analyzer._native"
+    assert isinstance(session_engine("native", "bytes", True)[0], NativeByteDecoding)
+    # several byte streams (recordings, live taps), or a line's protocol or byte time named
+    for kind, positional, per_bus, byte_time_s in [
+        ("bytes", False, None, None),
+        ("mixed", False, None, None),
+        ("mixed", True, None, None),
+        ("bytes", True, {"rs232": "eg2-serial"}, None),
+        ("bytes", True, None, {"rs232": 1e-4}),
+    ]:
+        args = (kind, positional, None, per_bus, byte_time_s)
+        assert isinstance(session_engine("auto", *args)[0], Decoding)
+        with pytest.raises(ValueError, match="CAN input and single byte streams"):
+            session_engine("native", *args)
     assert isinstance(session_engine("python", "can", False)[0], Decoding)
+    assert isinstance(session_engine("python", "bytes", True)[0], Decoding)
 
 
 @needs_native

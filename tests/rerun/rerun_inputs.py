@@ -130,13 +130,14 @@ INPUTS = {
     "faults_serial": faults_serial,
 }
 TIMED = {"candump", "asc", "blf", "mcap", "mixed", "faults_can"}
-CAN_ONLY = {"candump", "asc", "blf", "mcap", "faults_can"}  # sessions the native engine decodes
+# sessions the native engine decodes: CAN input, and a raw dump's one byte stream
+NATIVE = {"candump", "asc", "blf", "mcap", "faults_can", "serial", "modbus", "faults_serial"}
 
 
 def engines(name: str) -> list[str]:
-    """The session engines an input can be decoded with: CAN input on both, byte streams
-    (and a recording that has them) on the Python decoders only."""
-    return ["python", "native"] if name in CAN_ONLY else ["python"]
+    """The session engines an input can be decoded with: CAN input and raw dumps on both, a
+    recording of byte streams on the Python decoders only."""
+    return ["python", "native"] if name in NATIVE else ["python"]
 
 
 # (input, engine) for every input on every engine it can be decoded with

@@ -79,11 +79,11 @@ def test_plot_saves_every_kind_of_input(tmp_path: Path, name: str, engine: str) 
     assert shown and all(v.entities for v in shown)  # no empty view
 
 
-def test_native_engine_on_a_byte_stream_is_a_usage_error(
+def test_native_engine_on_recorded_byte_streams_is_a_usage_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "x.rrd"
-    capture = str(CAPTURES / "serial_session.bin")
+    capture = str(INPUTS["mixed"](tmp_path))
     with pytest.raises(SystemExit) as exc:
         main(["plot", capture, "--engine", "native", "--save", str(out)])
     assert exc.value.code == 2

@@ -104,10 +104,12 @@ def test_every_input_is_replayed_whole_and_in_time_order(
 
 
 @needs_native
-@pytest.mark.parametrize("kind", ["candump log", ".asc", "can recording"])
+@pytest.mark.parametrize(
+    "kind", ["candump log", ".asc", "can recording", "serial dump", "modbus dump"]
+)
 def test_native_and_python_engines_fill_the_same_store(inputs: dict[str, Path], kind: str) -> None:
-    """The TUI picks the native engine for all-CAN input; ``--engine python`` the Python one:
-    the screens' data must be the same."""
+    """The TUI picks the native engine for all-CAN input and a raw dump's one byte stream;
+    ``--engine python`` the Python one: the screens' data must be the same."""
 
     async def store_of(*argv: str) -> list[tuple]:
         app = capture_app(inputs[kind], *argv)

@@ -236,8 +236,9 @@ def test_rerun_on_the_tui_writes_a_real_rrd(tmp_path: Path, inputs: dict[str, Pa
         assert {"can0", "rs232", "rs485"} <= buses, sorted(rrd.entities)
 
 
-def test_an_engine_that_cannot_apply_is_a_usage_error() -> None:
-    term = Terminal(tui(str(ROOT / "captures" / "serial_session.bin"), "--engine", "native"))
+def test_an_engine_that_cannot_apply_is_a_usage_error(inputs: dict[str, Path]) -> None:
+    """A recording of serial lines (several byte streams) is no input of the native engine."""
+    term = Terminal(tui(str(inputs["demo recording"]), "--engine", "native"))
     term.child.expect(pexpect.EOF, timeout=30)
     term.child.close()
     assert term.child.exitstatus == 2
@@ -359,9 +360,9 @@ def test_sigterm_before_the_end_of_a_replay_is_an_interruption(inputs: dict[str,
     assert "stopped at" in term.after()
 
 
-def test_without_a_terminal_the_engine_usage_error_comes_first() -> None:
+def test_without_a_terminal_the_engine_usage_error_comes_first(inputs: dict[str, Path]) -> None:
     """Usage errors of the command line before "the TUI needs a terminal"."""
-    done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"), "--engine", "native")
+    done = eg2scope("tui", str(inputs["demo recording"]), "--engine", "native")
     assert done.returncode == 2
     assert "--engine native" in done.stderr and "needs a terminal" not in done.stderr
     done = eg2scope("tui", str(ROOT / "captures" / "serial_session.bin"))

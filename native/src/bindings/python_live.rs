@@ -682,7 +682,7 @@ pub(super) struct ItemFrame<'py> {
     channel: Option<Bound<'py, PyAny>>,
 }
 
-fn type_name(obj: &Bound<'_, PyAny>) -> String {
+pub(super) fn type_name(obj: &Bound<'_, PyAny>) -> String {
     obj.get_type()
         .name()
         .map(|n| n.to_string())

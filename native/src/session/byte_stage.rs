@@ -63,6 +63,9 @@ pub(crate) struct ByteStream {
     pub(crate) bus: Arc<str>,
     /// the protocol to use (None: detect)
     pub(crate) protocol: Option<&'static str>,
+    /// the protocol the bus was named after (`Decoding.per_bus`): fixes it when the stream
+    /// starts, or at its next chunk while it is undetected, as `protocol` does
+    named: Option<&'static str>,
     pub(crate) dec: Option<ByteDecoder>,
     /// chunks read before the protocol was chosen (replayed one by one, as the Python does)
     undetected: Vec<HeldChunk>,
@@ -74,6 +77,7 @@ impl ByteStream {
         ByteStream {
             bus,
             protocol,
+            named: None,
             dec: None,
             undetected: Vec::new(),
             undetected_len: 0,
@@ -117,7 +121,7 @@ impl ByteStream {
     fn hold(&mut self, data: &[u8], t: Option<f64>, direction: Option<&'static str>) -> bool {
         self.undetected.push((data.to_vec(), t, direction));
         self.undetected_len += data.len();
-        let protocol = match self.protocol {
+        let protocol = match self.named.or(self.protocol) {
             Some(p) => p,
             None if self.undetected_len < DETECT_BYTES => return false,
             None => self.choose(),
@@ -210,8 +214,10 @@ impl ByteStream {
 
 /// `Decoding` for one byte stream: chunks in, records out in stream order.
 pub struct ByteStage {
-    /// the protocol of the stream (None: detect), until its first bytes
+    /// the protocol of the stream (None: detect)
     protocol: Option<&'static str>,
+    /// buses named after their protocol (`Decoding.per_bus`)
+    named: Vec<(Arc<str>, &'static str)>,
     stream: Option<(Arc<str>, Arc<str>, ByteStream)>,
     linter: TimingLinter,
     pairer: Pairer,
@@ -223,6 +229,7 @@ impl ByteStage {
     pub fn new(protocol: Option<&'static str>, positional: bool) -> Self {
         ByteStage {
             protocol,
+            named: Vec::new(),
             stream: None,
             linter: TimingLinter::new(),
             pairer: Pairer::new(positional),
@@ -230,10 +237,22 @@ impl ByteStage {
         }
     }
 
-    /// `Decoding.set_protocol` (before the stream's first bytes; later it has no effect, as in
-    /// the Python, where the protocol is read when the stream starts).
-    pub fn set_protocol(&mut self, protocol: &'static str) {
-        self.protocol = Some(protocol);
+    /// `Decoding.set_protocol`: `bus` speaks `protocol`. Read when its stream starts, and at
+    /// its next chunk while it is still undetected (the Python starts it again then); a stream
+    /// decoding already keeps its protocol.
+    pub fn set_protocol(&mut self, bus: &str, protocol: &'static str) {
+        self.named.retain(|(b, _)| **b != *bus);
+        self.named.push((Arc::from(bus), protocol));
+        if let Some((b, _, s)) = &mut self.stream {
+            if **b == *bus {
+                s.named = Some(protocol);
+            }
+        }
+    }
+
+    /// The (bus, stream) this stage decodes: the first one fed (None before).
+    pub fn stream(&self) -> Option<(&str, &str)> {
+        self.stream.as_ref().map(|(b, s, _)| (&**b, &**s))
     }
 
     /// One chunk of stream `stream` of bus `bus`: Err when it is not the stream this stage
@@ -257,6 +276,7 @@ impl ByteStage {
             None => {
                 let name: Arc<str> = Arc::from(bus);
                 let mut byte_stream = ByteStream::new(name.clone(), self.protocol);
+                byte_stream.named = self.named.iter().find(|(b, _)| **b == *bus).map(|x| x.1);
                 byte_stream.feed_chunk(chunk.0, chunk.1, chunk.2, decoded);
                 self.stream = Some((name, Arc::from(stream), byte_stream));
             }
