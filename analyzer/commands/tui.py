@@ -35,7 +35,7 @@ def add_subparser(sub: Any) -> None:
             "pause, filter, search, marks), the selected frame's fields and bytes, one row per "
             "gripper with its state, the problems found, register watch and latency, each "
             "grip cycle as it ends (its outcome and figures; Enter shows its frames), and a "
-            "health line per bus (load, frames/s, errors/s, the latest event). Takes "
+            "health line per bus (load, frames/s, errors/s, the worst recent event). Takes "
             "every live source 'live' takes, the simulated buses (--demo), or a capture file "
             "'decode' reads, replayed (--speed)."
         ),
