@@ -138,10 +138,12 @@ def capture_options(args: argparse.Namespace) -> CaptureOptions:
     )
 
 
-# (option, metavar, what it is, what of a capture's bus health it counts)
+# (option, its short form, metavar, what it is, what of a capture's bus health it counts);
+# -b as python-can's, which tui's and plot's live sources take
 RATE_OPTIONS = (
     (
         "--bitrate",
+        "-b",
         "BPS",
         "CAN bit rate for",
         f"bus load, every CAN bus (default: the rate a recording says its tap ran at, else "
@@ -149,6 +151,7 @@ RATE_OPTIONS = (
     ),
     (
         "--baud",
+        None,
         "N",
         "serial baud rate for",
         f"line use, gaps and turnaround, every serial bus (default: the rate a recording says "
@@ -162,12 +165,13 @@ def add_rate_arguments(parser: argparse.ArgumentParser) -> None:
     whose live sources take them already (python-can's ``-b/--bitrate``, the serial tap's
     ``--baud``: tui, plot; add them first) keeps those, their help saying what they do to a
     capture: one option for both, not a second that clashes."""
-    for flag, metavar, what, figures in RATE_OPTIONS:
+    for flag, short, metavar, what, figures in RATE_OPTIONS:
         # argparse has no public look-up of an option already added
         live = parser._option_string_actions.get(flag)
         if live is None:
+            flags = (flag,) if short is None else (flag, short)
             parser.add_argument(
-                flag, type=positive_int, metavar=metavar, help=f"{what} a capture's {figures}"
+                *flags, type=positive_int, metavar=metavar, help=f"{what} a capture's {figures}"
             )
         else:
             tap = (live.help or "").rstrip(".")
