@@ -10,7 +10,7 @@ from typing import Any
 from ..errors import EXIT_DAMAGED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..interrupts import noted_interrupts
 from ..session import engine
-from .common import add_protocol_argument, positive_int
+from .common import add_protocol_argument, add_rate_arguments, positive_int, rate_options
 from .helptext import BATCH_EXIT_STATUS, HelpFormatter
 
 INSTALL_HINT = "pip install 'eg2scope[fleet]'"
@@ -26,12 +26,12 @@ def add_subparser(sub: Any) -> None:
             "read directly: records/ (every record, the columns of 'decode --format parquet' "
             "plus capture_path and capture_hash), states/ (every state sample), cycles/ (every "
             "grip cycle, as 'eg2scope cycles' finds them), health/ (each bus's frames, bits, "
-            "load, errors and controller state, one row per second; the bit rate or baud a "
-            "recording gives, else the EG2's) and captures/ (one row per capture: counts, "
-            "latency, damage), partitioned by day and bus. A "
-            "capture the dataset holds already (same sha256, decoded with the same --protocol) "
-            "is skipped, so a run that was interrupted finishes the rest when run again; "
-            "--force decodes everything again. "
+            "load, errors and controller state, one row per second; at --bitrate and --baud, "
+            "else the rate a recording gives, else the EG2's) and captures/ (one row per "
+            "capture: counts, latency, damage), partitioned by day and bus. A capture the "
+            "dataset holds already (same sha256, decoded with the same --protocol, --bitrate "
+            "and --baud) is skipped, so a run that was interrupted finishes the rest when run "
+            "again; --force decodes everything again. "
             "See docs/fleet.md."
         ),
         epilog=(
@@ -73,6 +73,7 @@ def add_subparser(sub: Any) -> None:
         "--force", action="store_true", help="decode every capture again, even those in the dataset"
     )
     add_protocol_argument(parser)
+    add_rate_arguments(parser)
     parser.add_argument(
         "--engine",
         choices=engine.ENGINES,
@@ -142,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
     if not paths:
         raise UsageError(f"no captures in {', '.join(args.inputs)}")
     check_protocol(paths, args.protocol)
+    rates = rate_options(args)
     tally = Tally()
     dashboard = None if args.dashboard_address.lower() == "none" else args.dashboard_address
     options = DaskOptions(args.workers or default_workers(), args.scheduler, args.host, dashboard)
@@ -155,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             with layout.run_lock(root):
-                jobs, skipped = plan(paths, root, args.protocol, args.force, args.engine)
+                jobs, skipped = plan(paths, root, args.protocol, args.force, args.engine, rates)
                 sizes = {str(p): p.stat().st_size for p in paths}
                 with BatchProgress(sizes, tally, show) as progress:
                     for result in skipped:

@@ -1,5 +1,6 @@
 """The options several commands share, and their typed forms: the input options of the offline
-commands (decode, stats, plot and tui on captures) and the options of a live session."""
+commands (decode, stats, plot and tui on captures), the rates a capture's bus health is counted
+at, and the options of a live session."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import TYPE_CHECKING
 from decoders.registry import resolve_protocol
 
 from ..errors import UsageError
+from ..health.rates import DEFAULT_BAUD, DEFAULT_BITRATE, RateOptions
 from ..plot.target import DEFAULT as DEFAULT_TARGET
 from ..session.capture import CaptureOptions
 from ..session.engine import ENGINES
@@ -134,6 +136,57 @@ def capture_options(args: argparse.Namespace) -> CaptureOptions:
         progress=not args.no_progress,
         engine=getattr(args, "engine", "auto"),
     )
+
+
+# (option, its short form, metavar, what it is, what of a capture's bus health it counts);
+# -b as python-can's, which tui's and plot's live sources take
+RATE_OPTIONS = (
+    (
+        "--bitrate",
+        "-b",
+        "BPS",
+        "CAN bit rate for",
+        f"bus load, every CAN bus (default: the rate a recording says its tap ran at, else "
+        f"{DEFAULT_BITRATE}, the EG2's)",
+    ),
+    (
+        "--baud",
+        None,
+        "N",
+        "serial baud rate for",
+        f"line use, gaps and turnaround, every serial bus (default: the rate a recording says "
+        f"its tap ran at, else {DEFAULT_BAUD}, the EG2's)",
+    ),
+)
+
+
+def add_rate_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--bitrate`` and ``--baud``: the rates a capture's bus health is counted at. A command
+    whose live sources take them already (python-can's ``-b/--bitrate``, the serial tap's
+    ``--baud``: tui, plot; add them first) keeps those, their help saying what they do to a
+    capture: one option for both, not a second that clashes."""
+    for flag, short, metavar, what, figures in RATE_OPTIONS:
+        # argparse has no public look-up of an option already added
+        live = parser._option_string_actions.get(flag)
+        if live is None:
+            flags = (flag,) if short is None else (flag, short)
+            parser.add_argument(
+                *flags, type=positive_int, metavar=metavar, help=f"{what} a capture's {figures}"
+            )
+        else:
+            tap = (live.help or "").rstrip(".")
+            live.help = f"{tap}; replaying a capture file, the {what} its {figures}"
+
+
+def rate_options(args: argparse.Namespace) -> RateOptions:
+    """The rates ``add_rate_arguments``' options give a capture (None: not given). A usage
+    error for one that is not positive: a live source's own ``-b`` and ``--baud`` take any
+    whole number, and are checked where its tap is made."""
+    given = RateOptions(getattr(args, "bitrate", None), getattr(args, "baud", None))
+    for (flag, *_), value in zip(RATE_OPTIONS, (given.bitrate, given.baud), strict=True):
+        if value is not None and value < 1:
+            raise UsageError(f"{flag} of a capture must be a positive number, not {value}")
+    return given
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, record_required: bool) -> None:

@@ -21,6 +21,7 @@ import can.cli
 from decoders.model import EG2_CAN
 from decoders.registry import resolve_protocol
 
+from ..health.rates import DEFAULT_BAUD
 from ..sources.tap_options import TapOptions
 
 # the namespace keys add_bus_arguments fills (create_bus_from_namespace reads the same)
@@ -44,7 +45,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, bridge: bool = True) -
         help="serial port or pyserial URL to watch (never written to); give it "
         "twice to watch one adapter per RS232 wire",
     )
-    ser.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    # None when not given: tui and plot tell a capture's own rate from one given for it
+    ser.add_argument("--baud", type=int, help=f"serial baud rate (default {DEFAULT_BAUD})")
     add_line_arguments(ser)
     if bridge:
         ser.add_argument(
@@ -128,7 +130,7 @@ def tap_options(args: argparse.Namespace) -> TapOptions:
         can={key: getattr(args, key) for key in CAN_KEYS if key in args},
         bus_kwargs=dict(getattr(args, "bus_kwargs", {}) or {}),
         serial=tuple(getattr(args, "serial", ())),
-        baud=args.baud,
+        baud=DEFAULT_BAUD if args.baud is None else args.baud,
         rts=LINE_STATES[getattr(args, "rts", "low")],
         dtr=LINE_STATES[getattr(args, "dtr", "low")],
         bridge=None if not bridge else (bridge[0], bridge[1]),

@@ -6,12 +6,15 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..health.rates import RateOptions
 from ..plot.launch import PlotOptions, plot
 from ..plot.target import TargetChoice
 from .common import (
+    add_rate_arguments,
     add_replay_arguments,
     add_session_arguments,
     live_options,
+    rate_options,
     whole_capture_options,
 )
 from .demo import add_demo_arguments, demo_options
@@ -28,7 +31,8 @@ def add_subparser(sub: Any) -> None:
             "grip cycles (a lane coloured by outcome, their figures in a log), the controller's "
             "commands, the bus's errors and each bus's health second by second (load %, "
             "frames, errors and unanswered requests per second, the CAN controller's state; "
-            "the load at the rate a recording or a live tap gives, else the EG2's), on one "
+            "the load at the rate given (-b, --baud), else a recording's or a live tap's own, else "
+            "the EG2's), on one "
             "clock in Rerun: from any "
             "capture 'decode' reads or an eg2scope .mcap recording, or live from a bus. Every "
             "reading is plotted (nothing is downsampled), on the timelines capture_time and "
@@ -77,6 +81,7 @@ def add_subparser(sub: Any) -> None:
     )
     add_replay_arguments(parser, "all at once", "The plot is the same either way")
     add_source_arguments(parser)
+    add_rate_arguments(parser)  # the live sources' -b and --baud, for a capture too
     parser.add_argument(
         "--demo",
         action="store_true",
@@ -100,5 +105,6 @@ def plot_options(args: argparse.Namespace) -> PlotOptions:
         live=live_options(args),
         taps=tap_options(args),
         capture=whole_capture_options(args) if args.file else None,
+        rates=rate_options(args) if args.file else RateOptions(),
         demo=demo_options(args) if args.demo else None,
     )

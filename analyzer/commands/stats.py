@@ -21,7 +21,7 @@ from ..health.table import print_health
 from ..session.capture import finish_capture, open_reader, run_capture
 from ..sinks.stats import StatsListener
 from ..stats import COUNT_NAMES
-from .common import add_input_arguments, capture_options, positive_int
+from .common import add_input_arguments, add_rate_arguments, capture_options, rate_options
 from .helptext import FILE_EXIT_STATUS, HelpFormatter
 
 
@@ -46,20 +46,7 @@ def add_subparser(sub: Any) -> None:
         formatter_class=HelpFormatter,
     )
     add_input_arguments(parser)
-    parser.add_argument(
-        "--bitrate",
-        type=positive_int,
-        metavar="BPS",
-        help="CAN bit rate for the bus load, every CAN bus (default: the rate a recording "
-        "says its tap ran at, else 500000, the EG2's)",
-    )
-    parser.add_argument(
-        "--baud",
-        type=positive_int,
-        metavar="N",
-        help="serial baud rate for line use, gaps and turnaround, every serial bus (default: "
-        "the rate a recording says its tap ran at, else 115200, the EG2's)",
-    )
+    add_rate_arguments(parser)
     parser.add_argument(
         "--format",
         "-f",
@@ -75,10 +62,10 @@ def _ms(x: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    opts = capture_options(args)
+    opts, rates = capture_options(args), rate_options(args)
     reader = open_reader(opts)
     listener = StatsListener()
-    health = HealthListener(rates_of_capture(reader.metadata, args.bitrate, args.baud))
+    health = HealthListener(rates_of_capture(reader.metadata, rates.bitrate, rates.baud))
     cycles = CycleSummary()  # of every record: --device picks the grippers, below
     whole = [health, CyclesListener(cycles, opts.device)]
     session, reader = run_capture(opts, [listener], reader, whole=whole)

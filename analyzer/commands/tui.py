@@ -6,15 +6,18 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..health.rates import RateOptions
 from ..session.engine import ENGINES
 from ..tui.launch import TuiOptions, run_tui
 from ..tui.store import LIVE_KEEP
 from .common import (
+    add_rate_arguments,
     add_rerun_argument,
     add_session_arguments,
     capture_options,
     live_options,
     positive_int,
+    rate_options,
     speed_type,
 )
 from .demo import add_demo_arguments, demo_options
@@ -88,6 +91,7 @@ def add_subparser(sub: Any) -> None:
         f"{LIVE_KEEP:,} of a live session, every record of a capture file; 'all': every one",
     )
     add_source_arguments(parser)
+    add_rate_arguments(parser)  # the live sources' -b and --baud, for a capture too
     add_session_arguments(parser, record_required=False)
     add_rerun_argument(parser)
     add_demo_arguments(parser)
@@ -100,6 +104,7 @@ def tui_options(args: argparse.Namespace) -> TuiOptions:
         live=live_options(args),
         taps=tap_options(args),
         capture=capture_options(args) if args.file else None,
+        rates=rate_options(args) if args.file else RateOptions(),
         demo=demo_options(args) if args.demo else None,
         engine=args.engine,
         freeze_on=args.freeze_on,

@@ -13,7 +13,7 @@ import datetime as dt
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
@@ -23,7 +23,7 @@ from decoders.model import EG2_SERIAL
 from decoders.registry import detect_protocol, short_name
 
 from .. import __version__
-from ..health.rates import rates_of_capture
+from ..health.rates import FROM_OPTION_BAUD, FROM_OPTION_BITRATE, RateOptions, rates_of_capture
 from ..parquet import native as native_parquet
 from ..session import engine as native
 from ..session.capture import CaptureOptions, byte_protocol, open_reader, protocol_hint, run_capture
@@ -56,14 +56,18 @@ class CaptureJob:
     engine: str = (
         "auto"  # "python": the Python decoders only; else the native core where it applies
     )
+    # the rates given for its health rows (None: the capture's own, else the EG2's)
+    rates: RateOptions = field(default_factory=RateOptions)
 
     @property
     def decode_options(self) -> str:
-        """The options that change a capture's records, as the command line says them: with
-        its content hash, what identifies a capture's rows (CAN captures ignore the
-        protocol: ``-p can`` is the same as none)."""
+        """The options that change a capture's rows, as the command line says them: with its
+        content hash, what identifies them (CAN captures ignore the protocol: ``-p can`` is
+        the same as none; a rate given is said, the capture's own is not)."""
         protocol = byte_protocol(CaptureOptions(self.path, self.protocol))
-        return f"--protocol {'auto' if protocol is None else short_name(protocol)}"
+        given = ((FROM_OPTION_BITRATE, self.rates.bitrate), (FROM_OPTION_BAUD, self.rates.baud))
+        rates = "".join(f" {flag} {rate}" for flag, rate in given if rate is not None)
+        return f"--protocol {'auto' if protocol is None else short_name(protocol)}{rates}"
 
 
 @dataclass
@@ -124,7 +128,8 @@ def _decode(
     hint = protocol_hint(opts, reader)
     files = PartitionFiles(root, digest, utc_day(stat.st_mtime))
     tables = CaptureTables(files, job.path)
-    views = BusViews(files, job.path, rates_of_capture(reader.metadata))
+    rates = rates_of_capture(reader.metadata, job.rates.bitrate, job.rates.baud)
+    views = BusViews(files, job.path, rates)
     try:
         damage = _fill(opts, job.engine, reader, (tables, views), progress, interrupted)
         if interrupted():

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
+from ..health.rates import RateOptions
 from . import layout
 from .capture_task import (
     DAMAGED,
@@ -49,7 +50,12 @@ class DaskOptions:
 
 
 def plan(
-    paths: Iterable[Path], root: Path, protocol: str | None, force: bool, engine: str = "auto"
+    paths: Iterable[Path],
+    root: Path,
+    protocol: str | None,
+    force: bool,
+    engine: str = "auto",
+    rates: RateOptions | None = None,
 ) -> tuple[list[CaptureJob], list[CaptureResult]]:
     """The jobs to run, and the captures skipped without reading them: a path whose size and
     modification time match its row in ``captures/``, decoded with the same options, has the
@@ -58,7 +64,7 @@ def plan(
     jobs, skipped = [], []
     for path in paths:
         stat = path.stat()
-        job = CaptureJob(str(path), str(root), protocol, force, engine)
+        job = CaptureJob(str(path), str(root), protocol, force, engine, rates or RateOptions())
         key = (str(path), stat.st_size, stat.st_mtime_ns // 1000, job.decode_options)
         digest = known.get(key)
         if digest is not None:

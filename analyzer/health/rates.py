@@ -27,6 +27,15 @@ class Rate:
 
 
 @dataclass(frozen=True)
+class RateOptions:
+    """The rates the options give a capture's buses (``--bitrate``, ``--baud``), each for every
+    bus of its kind; None: not given (the capture's own, else the default)."""
+
+    bitrate: int | None = None
+    baud: int | None = None
+
+
+@dataclass(frozen=True)
 class BusRates:
     """The rate of every bus: an option's for all buses of its kind, else the capture's for the
     bus (``known``), else the default. ``ports``: each serial bus's device, where known."""

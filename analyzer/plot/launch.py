@@ -4,11 +4,11 @@ Rerun view (docs/rerun.md). Rerun is imported only when the view is made."""
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_INTERRUPTED, UsageError
-from ..health.rates import BusRates, rates_of_capture
+from ..health.rates import BusRates, RateOptions, rates_of_capture
 from ..live_runner import LiveOptions, metadata, run_demo, run_session
 from ..session.batches import session_engine
 from ..session.capture import CaptureOptions, finish_capture, open_reader, run_capture
@@ -27,21 +27,23 @@ if TYPE_CHECKING:
 class PlotOptions:
     """``eg2scope plot``'s options, typed. ``target``: where the plot goes; ``live``: a live
     session's (its recording, its end); ``taps``: the live sources; ``capture``: a capture to
-    plot instead (None: live); ``demo``: the simulated buses to plot instead (None: none).
-    A bus's load is counted at the rate a recording says its tap ran at, a live tap's own, or
-    the EG2's (``health.rates``)."""
+    plot instead (None: live); ``rates``: the rates given for the capture's bus health;
+    ``demo``: the simulated buses to plot instead (None: none). A bus's load is counted at the
+    rate given, else the rate a recording says its tap ran at, a live tap's own, or the EG2's
+    (``health.rates``)."""
 
     target: TargetChoice
     live: LiveOptions
     taps: TapOptions
     capture: CaptureOptions | None = None
+    rates: RateOptions = field(default_factory=RateOptions)
     demo: DemoOptions | None = None
 
 
 def plot(opts: PlotOptions) -> int:
     """Plot what the options name: a capture, or one live source (the demo, or taps)."""
     live = opts.demo is not None or opts.taps.given
-    if opts.capture is not None and live:
+    if opts.capture is not None and (opts.demo is not None or _names_a_tap(opts.taps)):
         raise UsageError("give a capture file or a live source (or --demo), not both")
     if opts.capture is None and not live:
         raise UsageError(
@@ -52,15 +54,21 @@ def plot(opts: PlotOptions) -> int:
         return plot_live(opts)
     if opts.live.output:
         raise UsageError("-o records a live source; a capture is plotted as it is")
-    return plot_capture(opts.capture, opts.target)
+    return plot_capture(opts.capture, opts.target, opts.rates)
 
 
-def plot_capture(capture: CaptureOptions, choice: TargetChoice) -> int:
-    """The capture in Rerun; a served web viewer stays up unless the user stopped it."""
+def _names_a_tap(taps: TapOptions) -> bool:
+    """Whether the source options name a live source: ``-b`` alone is a capture's bit rate."""
+    return replace(taps, can={k: v for k, v in taps.can.items() if k != "bitrate"}).given
+
+
+def plot_capture(capture: CaptureOptions, choice: TargetChoice, given: RateOptions) -> int:
+    """The capture in Rerun, its bus health at the rates ``given`` (where not given, its own or
+    the EG2's); a served web viewer stays up unless the user stopped it."""
     target = chosen_target(choice, capture.path)
     reader = open_reader(capture)  # a capture that cannot be read fails before a viewer opens
     try:
-        rates = rates_of_capture(reader.metadata)
+        rates = rates_of_capture(reader.metadata, given.bitrate, given.baud)
         listener = _capture_listener(capture, reader, target, rates)
     except BaseException:
         reader.close()

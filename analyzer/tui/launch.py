@@ -5,13 +5,14 @@ given back, with the exit status. The app (Textual) is imported only when it run
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from contextlib import ExitStack, redirect_stderr
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_ERROR, UsageError
-from ..health.rates import rates_of_capture
+from ..health.rates import BusRates, RateOptions, rates_of_capture
 from ..live_runner import (
     LiveOptions,
     byte_times,
@@ -41,13 +42,15 @@ if TYPE_CHECKING:
 class TuiOptions:
     """``eg2scope tui``'s options, typed. ``live``: the live session's (its recording, its
     end, ``--rerun``); ``taps``: the live sources; ``capture``: the capture to replay instead
-    (None: live); ``demo``: the simulated buses to watch instead (None: none); ``engine``: the
-    session's decoding; ``freeze_on``: the trigger armed at the start (None: none); ``keep``:
-    how many of the newest records the TUI keeps (None: every one)."""
+    (None: live); ``rates``: the rates given for the capture's bus health (its own, else the
+    EG2's, where not given); ``demo``: the simulated buses to watch instead (None: none);
+    ``engine``: the session's decoding; ``freeze_on``: the trigger armed at the start (None:
+    none); ``keep``: how many of the newest records the TUI keeps (None: every one)."""
 
     live: LiveOptions
     taps: TapOptions
     capture: CaptureOptions | None = None
+    rates: RateOptions = field(default_factory=RateOptions)
     demo: DemoOptions | None = None
     engine: str = "auto"
     freeze_on: str | None = None
@@ -87,7 +90,7 @@ def session_plan(opts: TuiOptions, stack: ExitStack, notes: Notes) -> SessionPla
         extra = extra_listeners(opts, live=True, notes=notes)
         return live_plan(opts, rig.taps, rig.protocols, rig.run_hosts, extra)
     if opts.capture is not None:
-        return capture_plan(opts, stack, extra_listeners(opts, live=False, notes=notes))
+        return capture_plan(opts, stack, capture_listeners(opts, notes))
     taps = make_taps(opts.taps)
     return live_plan(opts, taps, {}, None, extra_listeners(opts, live=True, notes=notes))
 
@@ -101,17 +104,26 @@ def _app(plan: SessionPlan, engine: str) -> Eg2ScopeApp:
         raise UsageError(f"--engine {engine}: {exc}") from None
 
 
-def extra_listeners(opts: TuiOptions, live: bool, notes: Notes) -> list[Listener]:
-    """``--rerun``: the Rerun listener ``record --rerun`` and ``live --rerun`` use. What it says
-    on stderr (where the .rrd went, the web viewer's address) goes to ``notes``: shown in the
-    TUI and printed again once the terminal is given back."""
+def extra_listeners(
+    opts: TuiOptions, live: bool, notes: Notes, rates: BusRates | None = None
+) -> list[Listener]:
+    """``--rerun``: the Rerun listener ``record --rerun`` and ``live --rerun`` use, its bus
+    health at ``rates`` (None: the EG2's). What it says on stderr (where the .rrd went, the
+    web viewer's address) goes to ``notes``: shown in the TUI and printed again once the
+    terminal is given back."""
     if opts.live.rerun is None:
         return []  # Rerun is imported only when it is asked for
     from ..plot.listener import rerun_listener
 
+    source = opts.live.output or opts.path
     with redirect_stderr(notes):  # the listener's output keeps the stream it is given
-        rerun = rerun_listener(opts.live.rerun, source=opts.live.output or opts.path, live=live)
+        rerun = rerun_listener(opts.live.rerun, source=source, live=live, rates=rates)
     return [] if rerun is None else [rerun]
+
+
+def capture_listeners(opts: TuiOptions, notes: Notes) -> Callable[[BusRates], list[Listener]]:
+    """``extra_listeners`` of a capture, made once its rates are known."""
+    return lambda rates: extra_listeners(opts, live=False, notes=notes, rates=rates)
 
 
 def live_plan(
@@ -158,9 +170,12 @@ def live_plan(
 
 
 def capture_plan(
-    opts: TuiOptions, stack: ExitStack, extra: list[Listener] | None = None
+    opts: TuiOptions,
+    stack: ExitStack,
+    extra: Callable[[BusRates], list[Listener]] | None = None,
 ) -> SessionPlan:
-    """The plan of the capture ``opts.capture`` replayed."""
+    """The plan of the capture ``opts.capture`` replayed; ``extra`` makes the listeners it
+    feeds besides the TUI's, given the capture's rates (its health as the TUI's own)."""
     from .app import SessionPlan
 
     capture = opts.capture
@@ -174,7 +189,8 @@ def capture_plan(
     reader = stack.enter_context(open_reader(capture))
     source = ReplaySource(reader, capture.speed)
     options = SessionOptions(protocol=byte_protocol(capture), engine=capture.engine)
-    outputs = list(extra or [])
+    rates = rates_of_capture(reader.metadata, opts.rates.bitrate, opts.rates.baud)
+    outputs = [] if extra is None else extra(rates)
 
     def build(tui: list[Listener]) -> Session:
         return Session(source, [*outputs, *tui], options)
@@ -183,7 +199,7 @@ def capture_plan(
         build,
         live=False,
         replay=source,
-        rates=rates_of_capture(reader.metadata),
+        rates=rates,
         freeze_on=opts.freeze_on,
         title=f"capture: {capture.path}",
         keep=opts.keep,

@@ -269,6 +269,23 @@ def buses_view(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
 # -- sessions: a forced engine, state samples ---------------------------------------------------
 
 
+#: the rates cells: each command given these rates (``-b`` as tui's and plot's live sources
+#: spell it), on inputs with CAN and serial buses, their rates recorded or not
+GIVEN_RATES = ("-b", "1000000", "--baud", "9600")
+RATES_KINDS = ("mixed-recording", "candump")
+
+
+def check_given_rates(buses: list[dict[str, Any]]) -> None:
+    """Every bus of ``stats --format json ... GIVEN_RATES`` is counted at the rate given, and
+    says the option."""
+    assert buses
+    for b in buses:
+        if b["kind"] == "can":
+            assert (b["bitrate"], b["bitrate_from"]) == (1_000_000, "--bitrate"), b["bus"]
+        else:
+            assert (b["baud"], b["baud_from"]) == (9600, "--baud"), b["bus"]
+
+
 def force_session_engine(monkeypatch: pytest.MonkeyPatch, engine: str) -> None:
     """Every session made from here on that leaves its engine to the session (``"auto"``)
     runs on ``engine`` (``SessionOptions.engine``, the way a session chooses its decoding and

@@ -22,7 +22,14 @@ import orjson
 import pyarrow as pa
 import pyarrow.dataset as ds
 import pytest
-from e2e_checks import Prefetch, eg2scope, skip_unless_native
+from e2e_checks import (
+    GIVEN_RATES,
+    RATES_KINDS,
+    Prefetch,
+    check_given_rates,
+    eg2scope,
+    skip_unless_native,
+)
 from e2e_inputs import IDS
 from scenario_capture import read_truth, record_scenarios
 from scenario_truth import ALL_BUSES, check, pairs
@@ -60,11 +67,12 @@ class BatchRun:
     stats: dict[str, Any]
 
 
-def run_all(path: Path, engine: str, cwd: Path) -> BatchRun:
-    argv = ["batch", str(path), "-o", "fleet", "--workers", "1", "--no-progress"]
+def run_all(path: Path, engine: str, cwd: Path, *rates: str) -> BatchRun:
+    """``batch``, ``cycles`` and ``stats`` of the capture; ``rates``: batch's and stats'."""
+    argv = ["batch", str(path), "-o", "fleet", "--workers", "1", "--no-progress", *rates]
     batch = eg2scope(*argv, "--engine", engine, cwd=cwd)
     cycles = eg2scope("cycles", str(path), "--format", "jsonl", "--no-progress", cwd=cwd)
-    stats = eg2scope("stats", str(path), "--format", "json", "--no-progress", cwd=cwd)
+    stats = eg2scope("stats", str(path), "--format", "json", "--no-progress", *rates, cwd=cwd)
     assert cycles.returncode == 0, cycles.stderr.decode()
     assert stats.returncode == 0, stats.stderr.decode()
     found = [orjson.loads(line) for line in cycles.stdout.splitlines()]
@@ -148,6 +156,19 @@ def test_the_health_table_adds_up_to_stats(kind: str, engine: str, batches) -> N
         name = DUMP_BUS.get(kind) or bus["bus"]
         check_seconds(sorted(by_bus.pop(name, []), key=lambda r: r["second"]), bus, ran.capture)
     assert not by_bus  # no rows of a bus stats does not know
+
+
+@pytest.mark.parametrize("kind", RATES_KINDS)
+def test_the_health_table_at_the_rates_given(kind: str, inputs, tmp_path) -> None:
+    """``batch PATH -b 1000000 --baud 9600``: each bus's rows are counted at the rate given,
+    ``rate_from`` the option, adding up to ``stats``' figures at the same options."""
+    ran = run_all(inputs[kind], "auto", tmp_path, *GIVEN_RATES)  # candump: native, where built
+    assert ran.batch.returncode == 0, ran.batch.stderr.decode()
+    check_given_rates(ran.stats["buses"])
+    stored = rows(ran.root, layout.HEALTH)
+    for bus in ran.stats["buses"]:
+        seconds = sorted((r for r in stored if r["bus"] == bus["bus"]), key=lambda r: r["second"])
+        check_seconds(seconds, bus, ran.capture)
 
 
 def check_seconds(seconds: list[dict[str, Any]], bus: dict[str, Any], capture: Path) -> None:

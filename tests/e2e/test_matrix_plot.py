@@ -10,11 +10,16 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
+import orjson
 import pytest
 from e2e_checks import (
+    GIVEN_RATES,
+    RATES_KINDS,
     Prefetch,
     Ran,
     Rrd,
+    check_given_rates,
+    eg2scope,
     eg2scope_runs,
     empty_views,
     force_session_engine,
@@ -88,6 +93,21 @@ def test_plot_on_each_engine(kind: str, engine: str, inputs, reference, tmp_path
     out = tmp_path / "plot.rrd"
     assert main(["plot", str(inputs[kind]), "--save", str(out), "--no-progress"]) == 0
     check_plot(out, kind, reference)
+
+
+@pytest.mark.parametrize("kind", RATES_KINDS)
+def test_plot_at_the_rates_given(kind: str, inputs, tmp_path) -> None:
+    """``plot PATH -b 1000000 --baud 9600``: each bus's seconds add up to ``stats``' figures at
+    the same options, which count every bus at the rate given."""
+    out = tmp_path / "plot.rrd"
+    assert main(["plot", str(inputs[kind]), "--save", str(out), "--no-progress", *GIVEN_RATES]) == 0
+    stats = eg2scope("stats", str(inputs[kind]), "--format", "json", *GIVEN_RATES, cwd=tmp_path)
+    assert stats.returncode == 0, stats.stderr.decode()
+    buses = orjson.loads(stats.stdout)["buses"]
+    check_given_rates(buses)
+    rrd = read_rrd(out)
+    for figures in buses:
+        check_bus_health(rrd, figures)
 
 
 def test_plot_live_demo_beside_its_recording(inputs, reference) -> None:

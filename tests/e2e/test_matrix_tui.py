@@ -16,7 +16,15 @@ from typing import Any
 
 import orjson
 import pytest
-from e2e_checks import eg2scope, force_session_engine, seq_names, skip_unless_native
+from e2e_checks import (
+    GIVEN_RATES,
+    RATES_KINDS,
+    check_given_rates,
+    eg2scope,
+    force_session_engine,
+    seq_names,
+    skip_unless_native,
+)
 from e2e_inputs import IDS, NATIVE_IDS
 from textual.worker import Worker, WorkerState
 
@@ -68,16 +76,18 @@ def replayed_on(kind: str, engine: str, inputs: Any) -> Replayed:
 
 
 @cache
-def command_json(command: str, path: Path) -> bytes:
-    """``eg2scope COMMAND PATH`` as a real process: ``cycles`` in JSONL, ``stats`` in JSON."""
+def command_json(command: str, path: Path, *argv: str) -> bytes:
+    """``eg2scope COMMAND PATH ARGV`` as a real process: ``cycles`` in JSONL, ``stats`` in
+    JSON."""
     fmt = "jsonl" if command == "cycles" else "json"
-    proc = eg2scope(command, str(path), "--format", fmt, cwd=path.parent)
+    proc = eg2scope(command, str(path), "--format", fmt, *argv, cwd=path.parent)
     assert proc.returncode == 0, proc.stderr.decode()
     return proc.stdout
 
 
-async def replayed(path: Path) -> Replayed:
-    """``eg2scope tui PATH``'s app, run until its session thread has ended (or failed)."""
+async def replayed(path: Path, *argv: str) -> Replayed:
+    """``eg2scope tui PATH ARGV``'s app, run until its session thread has ended (or
+    failed)."""
     failures: list[BaseException] = []
 
     def watch(message: Any) -> None:
@@ -85,7 +95,8 @@ async def replayed(path: Path) -> Replayed:
             failures.append(message.worker.error or RuntimeError("worker failed"))
 
     with ExitStack() as stack:
-        plan = capture_plan(tui_options(build_parser().parse_args(["tui", str(path)])), stack)
+        opts = tui_options(build_parser().parse_args(["tui", str(path), *argv]))
+        plan = capture_plan(opts, stack)
         app = Eg2ScopeApp(plan)
         try:
             async with app.run_test(size=SIZE, message_hook=watch) as pilot:
@@ -143,4 +154,15 @@ def test_tui_cycles_and_health_are_the_commands(kind: str, engine: str, inputs, 
     assert expected, "no cycles in this input: nothing is checked"
     assert by_start(run.cycles) == by_start(expected)
     buses = orjson.loads(command_json("stats", path))["buses"]
+    assert run.health == {b["bus"]: b for b in buses}
+
+
+@pytest.mark.parametrize("kind", RATES_KINDS)
+def test_tui_health_at_the_rates_given(kind: str, inputs) -> None:
+    """``tui PATH -b 1000000 --baud 9600``: each bus's health line ends on ``stats``' figures
+    at the same options, which count every bus at the rate given."""
+    run = asyncio.run(replayed(inputs[kind], *GIVEN_RATES))
+    assert run.ended and not run.failures
+    buses = orjson.loads(command_json("stats", inputs[kind], *GIVEN_RATES))["buses"]
+    check_given_rates(buses)
     assert run.health == {b["bus"]: b for b in buses}

@@ -216,6 +216,40 @@ def test_a_second_run_skips_everything_and_changes_nothing(
     assert code == 0 and "already in the dataset │     1" in out
 
 
+def test_the_rates_given_count_the_health_table(
+    fleet: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--bitrate`` and ``--baud`` (over the recording's own): every health row of the CAN
+    bus is counted at the bit rate given, of a serial line at the baud given, and says so in
+    ``rate`` and ``rate_from``, adding up to ``stats`` at the same options. The rates are part
+    of the capture's decode options: a run at the same rates skips it, one without them
+    decodes it again at its own."""
+    mcap, root = fleet["demo"], tmp_path / "d"
+    given = ("--bitrate", "1000000", "--baud", "9600")
+    assert batch(capsys, str(mcap), "-o", str(root), "--workers", "1", *given)[0] == 0
+    capsys.readouterr()
+    assert cli.main(["stats", str(mcap), "-f", "json", "--no-progress", *given]) == 0
+    buses = {b["bus"]: b for b in json.loads(capsys.readouterr().out)["buses"]}
+    seconds = table(root, layout.HEALTH).to_pylist()
+    assert {r["bus"] for r in seconds} == set(buses) == {"rs232", "rs485", "can0"}
+    for bus, figures in buses.items():
+        mine = [r for r in seconds if r["bus"] == bus]
+        said = ("can", 1_000_000, "--bitrate") if bus == "can0" else ("serial", 9600, "--baud")
+        assert {(r["kind"], r["rate"], r["rate_from"]) for r in mine} == {said}
+        assert sum(r["bits"] for r in mine) == figures["bits"]
+        for r in mine:
+            assert r["load_pct"] == pytest.approx(100.0 * r["bits"] / said[1], abs=1e-3)
+    [row] = table(root, layout.CAPTURES).to_pylist()
+    assert row["decode_options"] == "--protocol auto --bitrate 1000000 --baud 9600"
+    code, out, _ = batch(capsys, str(mcap), "-o", str(root), "--workers", "1", *given)
+    assert code == 0 and "already in the dataset │     1" in out
+    code, out, err = batch(capsys, str(mcap), "-o", str(root), "--workers", "1")
+    assert code == 0 and "decoded                │     1" in out
+    assert "decoded again (the dataset held it decoded with --protocol auto --bitrate" in err
+    own = {(r["kind"], r["rate_from"]) for r in table(root, layout.HEALTH).to_pylist()}
+    assert own == {("can", "default"), ("serial", "recording")}  # a virtual CAN bus has none
+
+
 def test_force_decodes_again_without_duplicates(
     fleet: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -261,6 +295,7 @@ def test_a_killed_attempt_is_cleaned_up_by_the_next(
             "--workers is for a local cluster",
         ),
         (["{capture}", "-o", "{tmp}/d", "--workers", "0"], "must be 1 or more"),
+        (["{capture}", "-o", "{tmp}/d", "--baud", "0"], "must be 1 or more"),
     ],
 )
 def test_usage_errors_fail_at_once(

@@ -20,12 +20,13 @@ from typing import Any
 
 import pytest
 from native_core import why_not
-from plot_checks import check_bus_health, check_cycles, lane_rows, plotted_cycles
+from plot_checks import check_bus_health, check_cycles, lane_rows, per_second, plotted_cycles
 from rrd_helpers import Rrd, read_rrd, views
 from scenario_capture import EG2SCOPE, ROOT, read_truth, record_scenarios
 
 WIDTH_TOLERANCE_MM = 0.2
 ALL_BUSES = ("rs232", "rs485", "can0")
+GIVEN_RATES = ("-b", "1000000", "--baud", "9600")  # "tour-rates": the tour at these rates
 
 
 @dataclass(frozen=True)
@@ -58,16 +59,18 @@ def plotted(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Plot
     record_scenarios(["tour", "bus-off"], mixed)
     record_scenarios(["tour"], can_only, buses="can")
     runs = {"tour": (mixed, "tour", "python"), "bus-off": (mixed, "bus-off", "python"),
-            "can-python": (can_only, "tour", "python")}  # fmt: skip
+            "can-python": (can_only, "tour", "python"),
+            "tour-rates": (mixed, "tour", "python")}  # fmt: skip
     if not why_not():
         runs["can-native"] = (can_only, "tour", "native")
     procs = {}
     for key, (folder, name, engine) in runs.items():
         mcap, rrd = str(folder / f"{name}.mcap"), str(folder / f"{key}.rrd")
+        rates = GIVEN_RATES if key == "tour-rates" else ()
         procs[key] = (
-            _start("plot", mcap, "--save", rrd, "--no-progress", "--engine", engine),
+            _start("plot", mcap, "--save", rrd, "--no-progress", "--engine", engine, *rates),
             _start("cycles", mcap, "--format", "jsonl", "--no-progress", "--engine", engine),
-            _start("stats", mcap, "--format", "json", "--no-progress"),
+            _start("stats", mcap, "--format", "json", "--no-progress", *rates),
         )
     out = {}
     for key, (plot, cycles, stats) in procs.items():
@@ -150,13 +153,36 @@ def test_the_native_engine_plots_the_cycles_and_health_of_the_python_one(
         check_truth(truth, seen)
 
 
-@pytest.mark.parametrize("key", ["tour", "bus-off", "can-python"])
+@pytest.mark.parametrize("key", ["tour", "bus-off", "can-python", "tour-rates"])
 def test_each_second_of_health_is_what_stats_counts(plotted: dict[str, Plotted], key: str) -> None:
     p = plotted[key]
     buses = p.stats["buses"]
     assert {b["bus"] for b in buses} == ({"can0"} if key.startswith("can") else set(ALL_BUSES))
     for figures in buses:
         check_bus_health(p.rrd, figures)
+
+
+def test_the_rates_given_count_every_seconds_load(plotted: dict[str, Plotted]) -> None:
+    """``plot REC -b 1000000 --baud 9600``: the CAN bus's load of each second is half its load
+    at the EG2's 500000, a serial line's its recorded baud over 9600 times the load at that
+    baud; ``stats`` at the same options says where the rates came from."""
+    given, own = plotted["tour-rates"], plotted["tour"]
+    was = {b["bus"]: b for b in own.stats["buses"]}
+    for figures in given.stats["buses"]:
+        bus = figures["bus"]
+        if figures["kind"] == "can":
+            assert (was[bus]["bitrate"], was[bus]["bitrate_from"]) == (500_000, "default")
+            assert (figures["bitrate"], figures["bitrate_from"]) == (1_000_000, "--bitrate")
+            times = 0.5
+        else:
+            assert (figures["baud"], figures["baud_from"]) == (9600, "--baud")
+            assert was[bus]["baud_from"] == "recording"
+            times = was[bus]["baud"] / 9600
+        loads = per_second(given.rrd, bus, "load_pct")
+        at_own = per_second(own.rrd, bus, "load_pct")
+        assert loads.keys() == at_own.keys(), bus
+        for second, load in loads.items():
+            assert load == pytest.approx(at_own[second] * times, abs=0.02), (bus, second)
 
 
 def test_the_bus_off_period_is_on_the_controller_lane(plotted: dict[str, Plotted]) -> None:

@@ -19,7 +19,13 @@ os.environ["TEXTUAL_ANIMATIONS"] = "none"
 from analyzer.cli import build_parser
 from analyzer.commands.tui import tui_options
 from analyzer.tui.app import Eg2ScopeApp
-from analyzer.tui.launch import TuiOptions, capture_plan, extra_listeners, live_plan
+from analyzer.tui.launch import (
+    TuiOptions,
+    capture_listeners,
+    capture_plan,
+    extra_listeners,
+    live_plan,
+)
 from analyzer.tui.notes import Notes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -64,7 +70,7 @@ def capture_app(path: Path, *argv: str, speed: float | None = None) -> Eg2ScopeA
         argv = (*argv, "--speed", f"{speed:g}")
     opts = tui_opts(str(path), *argv)
     notes = Notes()
-    plan = capture_plan(opts, _readers, extra_listeners(opts, live=False, notes=notes))
+    plan = capture_plan(opts, _readers, capture_listeners(opts, notes))
     plan.notes = notes
     return Eg2ScopeApp(plan)
 

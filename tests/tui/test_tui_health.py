@@ -8,13 +8,16 @@ from __future__ import annotations
 
 import asyncio
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import CAPTURES, SIZES, capture_app, demo_app, eg2scope, tui_opts, until
 
+from analyzer.errors import UsageError
 from analyzer.health.bus import NO_TIMING
+from analyzer.health.rates import DEFAULT_BAUD, RateOptions
 from analyzer.health.seconds import HealthSecond
 from analyzer.sim.rig import DemoRig
 from analyzer.sources.tap_options import make_taps
@@ -23,21 +26,22 @@ from analyzer.tui.messages import HealthUpdate
 from analyzer.tui.widgets.health import BusHealthLine, HealthLines, health_text
 
 
-def stats_buses(path: Path) -> dict[str, dict[str, Any]]:
-    done = eg2scope("stats", str(path), "--format", "json")
+def stats_buses(path: Path, *argv: str) -> dict[str, dict[str, Any]]:
+    done = eg2scope("stats", str(path), "--format", "json", *argv)
     assert done.returncode == 0, done.stderr
     return {b["bus"]: b for b in json.loads(done.stdout)["buses"]}
 
 
-async def replayed(path: Path, size: str) -> tuple[list[HealthUpdate], HealthLines]:
-    """The health updates the app got while it replayed the capture, and the lines at the end."""
+async def replayed(path: Path, size: str, *argv: str) -> tuple[list[HealthUpdate], HealthLines]:
+    """The health updates the app got while it replayed the capture (``tui PATH ARGV``), and
+    the lines at the end."""
     updates: list[HealthUpdate] = []
 
     def hook(message: Any) -> None:
         if isinstance(message, HealthUpdate):
             updates.append(message)
 
-    app = capture_app(path)
+    app = capture_app(path, *argv)
     try:
         async with app.run_test(size=SIZES[size], message_hook=hook) as pilot:
             await until(pilot, lambda: app.done, timeout=60)
@@ -84,6 +88,68 @@ def test_each_buses_seconds_add_up_to_stats_and_the_end_shows_its_figures(
         assert f"{figures['frames_per_s']:,.0f} frames/s" in line, line
     assert any(r.state == "bus_off" for r in rows["can0"])  # the tour's bus-off
     assert "no errors" not in next(line for line in text.splitlines() if line.startswith("can0"))
+
+
+def loads_of(updates: list[HealthUpdate]) -> dict[str, dict[int, float | None]]:
+    """Each bus's load of each second, as the updates gave them."""
+    loads: dict[str, dict[int, float | None]] = {}
+    for update in updates:
+        for row in update.seconds:
+            loads.setdefault(row.bus, {})[row.second] = row.load_pct
+    return loads
+
+
+def test_the_rates_given_count_a_captures_loads(tour: dict[str, Path], tmp_path: Path) -> None:
+    """``tui FILE --bitrate 1000000 --baud 9600``: every second's load of the CAN bus, and the
+    line's, is half of what it is at the EG2's 500000; a serial line's is its recorded baud
+    over 9600 times its load at that baud; the line ends on ``stats``' figures at the same
+    options, and ``--rerun`` plots the same loads."""
+    sys.path.insert(0, str(Path(__file__).parents[1] / "rerun"))
+    from plot_checks import per_second  # tests/rerun's reading of a plot's health seconds
+    from rrd_helpers import read_rrd
+
+    path, rrd = tour["mixed"], tmp_path / "given.rrd"
+    given = ("--bitrate", "1000000", "--baud", "9600")
+    default_updates, default = asyncio.run(replayed(path, "200x50"))
+    updates, lines = asyncio.run(replayed(path, "200x50", *given, "--rerun", str(rrd)))
+    at_default, at_given = loads_of(default_updates), loads_of(updates)
+    stats = stats_buses(path, *given)
+    assert set(at_given) == set(at_default) == set(stats) == {"rs232", "rs485", "can0"}
+    plotted = read_rrd(rrd)
+    for bus, figures in stats.items():
+        was, line = default.lines[bus].whole, lines.lines[bus]
+        assert was is not None and line.whole == figures  # stats' own, at the same options
+        if bus == "can0":
+            assert (was["bitrate"], was["bitrate_from"]) == (500_000, "default")
+            assert (figures["bitrate"], figures["bitrate_from"]) == (1_000_000, "--bitrate")
+            times = 0.5
+        else:
+            assert was["baud_from"] == "recording"  # the option outranks the recording
+            assert (figures["baud"], figures["baud_from"]) == (9600, "--baud")
+            times = was["baud"] / 9600
+        assert at_given[bus].keys() == at_default[bus].keys()
+        for second, load in at_given[bus].items():
+            assert load == pytest.approx((at_default[bus][second] or 0.0) * times, abs=0.02)
+        assert line.peak == pytest.approx((default.lines[bus].peak or 0.0) * times, abs=0.02)
+        assert per_second(plotted, bus, "load_pct") == pytest.approx(at_given[bus])
+    for text in shown(lines):
+        load = stats[text.split()[0]]["load_pct"]
+        assert f"load {load['mean']:.1f}% mean {load['max']:.1f}% max" in text, text
+
+
+def test_the_live_sources_rate_options_are_a_captures_rates_too() -> None:
+    """``-b`` and ``--baud`` (python-can's and the serial tap's) given with a capture are its
+    rates; live they are the taps' alone; a rate that is not positive is a usage error."""
+    path = str(CAPTURES / "can_pick_place.log")
+    assert tui_opts(path, "-b", "1000000", "--baud", "9600").rates == RateOptions(1_000_000, 9600)
+    assert tui_opts(path, "--bitrate", "250000").rates == RateOptions(250_000, None)
+    assert tui_opts(path).rates == RateOptions()
+    live = tui_opts("--serial", "/dev/ttyUSB7", "--baud", "9600")
+    assert (live.rates, live.taps.baud) == (RateOptions(), 9600)
+    assert tui_opts("--serial", "/dev/ttyUSB7").taps.baud == DEFAULT_BAUD
+    for bad in (("-b", "0"), ("--baud", "-9600")):
+        with pytest.raises(UsageError, match="must be a positive number"):
+            tui_opts(path, *bad)
 
 
 def test_a_raw_dump_says_it_has_no_timing_rather_than_a_load() -> None:
