@@ -40,12 +40,13 @@ from decoders.model import REQUEST, RESPONSE, Record
 
 def failing_app(path: Path) -> Eg2ScopeApp:
     """The TUI as it was before issue 17's fix: the command line's protocol name "auto"
-    handed to the session unconverted, so its decoding raises KeyError on the first bytes."""
+    handed to the session unconverted, so its decoding raises KeyError on the first bytes (the
+    Python decoding's: the native one refuses the name when it is made)."""
     reader = open_reader(CaptureOptions(str(path)))
     source = ReplaySource(reader)
 
     def build(tui) -> Session:
-        return Session(source, tui, SessionOptions(protocol="auto"))
+        return Session(source, tui, SessionOptions(protocol="auto", engine="python"))
 
     return Eg2ScopeApp(SessionPlan(build, live=False, replay=source, title=path.name))
 
