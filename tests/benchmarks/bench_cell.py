@@ -19,9 +19,9 @@ Per input, the real CLI in a subprocess, the runs interleaved (run 1 of every ca
   (d) cycles   ``cycles --format jsonl -o FILE``;
   (e) cycles/10 the same on a tenth of the frames (the same traffic, ``--frames`` / 10).
 
-``stats`` and ``cycles`` run with the engine ``auto``: the native core wherever it decodes a
-session (CAN), the Python decoders where it does not (byte streams in a session; ``--engine
-native`` is a usage error there). ``decode --engine native`` runs the native core's own
+``stats`` and ``cycles`` run with the engine ``auto``: the native core's session on all three
+(``CanStage`` for CAN, ``ByteStage`` for a raw dump's one byte stream, then the native
+``Tracker`` and ``CycleSegmenter``). ``decode --engine native`` runs the native core's own
 whole-file run on all three.
 
 "Health and cycles add at most 20% to the 1M-frame decode benchmarks on the native engine"
