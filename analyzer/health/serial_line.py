@@ -178,7 +178,8 @@ class SerialLine:
             "error_frames": self._error_frames(),
             "gaps_ms": self.gaps.summary(),
             "modbus_t3_5_ms": round(self.silence_ms, 3) if modbus else None,
-            "closer_than_t3_5": self.close_frames if modbus else None,
+            # without times nothing can be said to be close
+            "closer_than_t3_5": self.close_frames if modbus and not self.untimed else None,
             "turnaround_ms": [
                 {"device": device, **spread.summary()}
                 for device, spread in sorted(self.turnaround.items())

@@ -184,6 +184,13 @@ def test_a_raw_dump_has_counts_and_no_timing() -> None:
     assert bus["error_frames"]["total"] > 0  # the sample's damage: a bad checksum, garbage
 
 
+def test_a_raw_modbus_dump_says_nothing_of_close_frames() -> None:
+    """Without times no frame can be said to follow another too soon: null, not 0."""
+    (bus,) = cli_buses(ROOT / "captures" / "modbus_session.bin")
+    assert bus["protocol"] == MODBUS_RTU and bus["timing"] == "no timing in this capture"
+    assert bus["modbus_t3_5_ms"] == 1.75 and bus["closer_than_t3_5"] is None
+
+
 @pytest.mark.parametrize("engine", ["python", "native"])
 @pytest.mark.parametrize("name", ["serial_session.bin", "modbus_session.bin"])
 def test_a_raw_dumps_records_in_bulk_count_as_one_by_one(name: str, engine: str) -> None:
