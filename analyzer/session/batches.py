@@ -129,35 +129,37 @@ class PythonTracker(Tracker):
         return SampleSequence(super().update_many(records))
 
 
-class NativeCanDecoding:
-    """``SessionDecoding`` over ``_native.CanStage``: CAN frames in, a ``RecordBatch`` out."""
+class _NativeDecoding:
+    """A native stage (``CanStage``, ``ByteStage``) as the session calls it: its records come
+    as ``RecordBatch``es."""
 
-    def __init__(self, positional: bool) -> None:
-        core = _native.CanStage(positional)  # type: ignore[union-attr]
+    def __init__(self, core: Any) -> None:
         self.feed_items = core.feed
         self.tick = core.tick
         self.gap = core.gap
         self.cut_off = core.cut_off
         self.finish = core.finish
         self.stop = core.stop
+
+
+class NativeCanDecoding(_NativeDecoding):
+    """``SessionDecoding`` over ``_native.CanStage``: CAN frames in, a ``RecordBatch`` out."""
+
+    def __init__(self, positional: bool) -> None:
+        super().__init__(_native.CanStage(positional))  # type: ignore[union-attr]
 
     def set_protocol(self, bus: str, protocol: str) -> None:
         """Byte-stream protocols do not apply: this decoding is chosen for CAN-only input."""
         raise ValueError(f"a CAN session has no byte streams to decode as {protocol} ({bus})")
 
 
-class NativeByteDecoding:
+class NativeByteDecoding(_NativeDecoding):
     """``SessionDecoding`` over ``_native.ByteStage``: the chunks of one byte stream in, a
     ``RecordBatch`` out."""
 
     def __init__(self, protocol: str | None) -> None:
         core = _native.ByteStage(protocol)  # type: ignore[union-attr]
-        self.feed_items = core.feed
-        self.tick = core.tick
-        self.gap = core.gap
-        self.cut_off = core.cut_off
-        self.finish = core.finish
-        self.stop = core.stop
+        super().__init__(core)
         self.set_protocol = core.set_protocol
 
 
