@@ -30,6 +30,16 @@ class LatencyHistogram:
         self.max = max(self.max, ms)
         self.buckets[int(math.log(max(ms, 1e-6)) / _LOG_STEP)] += times
 
+    def add_many(self, values: list[float]) -> None:
+        """``add`` of each value, once (a batch's, in one loop)."""
+        buckets, log, top = self.buckets, math.log, self.max
+        for ms in values:
+            if ms > top:
+                top = ms
+            buckets[int(log(ms if ms > 1e-6 else 1e-6) / _LOG_STEP)] += 1
+        self.count += len(values)
+        self.max = top
+
     def percentile(self, p: float) -> float | None:
         if not self.count:
             return None

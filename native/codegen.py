@@ -613,8 +613,30 @@ def cycles_module() -> list[str]:
     fields = [f"super::tracker::{name.upper()}" for name in cycle_listener.FIELDS]
     note = "listener.py FIELDS: the state slots a reading's values are, in order."
     body = [*texts, "", *numbers, "", *array("FIELDS", "usize", fields, note)]
+    body += ["", *command_tables()]
     note = "analyzer/cycles/ (commands.py, model.py, rules.py, listener.py): kinds, fates, words."
     return module("cycles", note, body)
+
+
+def command_tables() -> list[str]:
+    """commands.py: the codes and registers of the commands that start and stop a motion."""
+    c = cycle_commands
+    serial = [f"(0x{code:02X}, {kind.upper()})" for code, kind in c._SERIAL.items()]
+    lines = array("SERIAL_COMMANDS", "(u8, &str)", serial, "`_SERIAL`: a serial CMD's kind.")
+    lines += const("MOVE", "&str", rs_str(c.MOVE))
+    writes = [f"0x{code:02X}" for code in sorted(c._MODBUS_WRITES)]
+    lines += array("MODBUS_WRITES", "i64", writes, "`_MODBUS_WRITES`: functions that write.")
+    lines += const("CAN_WRITE", "i64", str(c._CAN_WRITE), "`_CAN_WRITE`: the write operation.")
+    codes = [f"0x{code:02X}" for code in sorted(c.CODES)]
+    lines += array("CODES", "i64", codes, "`CODES`: the record codes of every candidate.")
+    lines += const("TARGET", "&str", rs_str(c.TARGET))
+    lines += const("STOP_REGISTER", "&str", rs_str(c._STOP_REGISTER))
+    words = []
+    for name, text in c._WORDS:
+        before, after = text.split("{}")
+        words.append(f"({rs_str(name)}, {rs_str(before)}, {rs_str(after)})")
+    note = "`_WORDS`: a register written beside the target, in words (before and after it)."
+    return [*lines, *array("WORDS", "(&str, &str, &str)", words, note)]
 
 
 def render() -> str:

@@ -1,15 +1,17 @@
 """Grip cycles as a session listener: records and state samples in, cycles to an output.
 
-Works on both engines' sequences through their bulk methods (analyzer/session/batches.py): of
-the records, one column (``code``) picks the few candidates (motion commands, stops and their
-answers), and only those become ``Record`` objects (``take``); the readings come from the
-samples' ``series``, a column per quantity and gripper. A batch's records come before its
-samples, so its commands wait for them (or for the next batch, a tick or the end, when it set
-no state).
+On the native engine the native segmenter does it all (``reads_tracker``): it finds the
+commands and answers in each batch's records and reads the session's tracker for what the
+records set, with no Python object per record or sample; only the ended cycles come back.
+
+Elsewhere it works on the sequences' bulk methods (analyzer/session/batches.py): of the records,
+one column (``code``) picks the few candidates (motion commands, stops and their answers), and
+only those become ``Record`` objects (``take``); the readings come from the samples' ``series``,
+a column per quantity and gripper. A batch's records come before its samples, so its commands
+wait for them (or for the next batch, a tick or the end, when it set no state).
 
 A cycle goes to the output once it has ended (the next motion command to its gripper, a stop, or
-the end of the capture), so a live session shows each cycle as it ends.
-"""
+the end of the capture), so a live session shows each cycle as it ends."""
 
 from __future__ import annotations
 
@@ -19,7 +21,6 @@ from typing import TYPE_CHECKING, Any, Final
 from ..session.engine import _native
 from ..session.listener import Listener
 from .commands import CODES, answer_of, command_of
-from .rules import build_cycle
 from .segmenter import COMMAND, READING, Event, Segmenter
 
 if TYPE_CHECKING:
@@ -37,7 +38,6 @@ FIELDS: Final = (
     "min_opening",
 )
 _CANDIDATE: Final = CODES.__contains__
-_CODES: Final = sorted(CODES)
 
 
 class CyclesListener(Listener):
@@ -52,24 +52,30 @@ class CyclesListener(Listener):
         self.device = device
         self.segmenter = Segmenter()
         self.native: Any = None  # the native core's segmenter, on the native engine
-        self.started = False  # records came (the first ones say which engine)
+        self.tracker: Any = None  # the native tracker it reads (``reads_tracker``)
         self.pending: list[tuple[str, int, Event]] = []  # this batch's commands and answers
         self.count = 0
         self.label = getattr(output, "label", "cycles output")
 
+    def reads_tracker(self, tracker: Any) -> bool:
+        """On the native engine, the native segmenter reads the session's tracker itself."""
+        if _native is None or not isinstance(tracker, _native.Tracker):
+            return False
+        tracker.readings = True
+        self.native = _native.CycleSegmenter()
+        self.tracker = tracker
+        return True
+
     def on_records(self, records: RecordSequence) -> None:
-        if not self.started and len(records):
-            self.started = True
-            if _native is not None and isinstance(records, _native.RecordBatch):
-                self.native = _native.CycleSegmenter()  # the first records say the engine
         if self.output.t0 is None and len(records):
             self.output.t0 = records[0].t
+        if self.native is not None:  # this batch's commands, answers and readings at once
+            self.native.feed_from(self.tracker, records)
+            self._write(self.native.take())
+            return
         self._flush()  # the last batch's commands: it set no state
-        if self.native is not None:  # the answers it keeps itself (``answer_of``)
-            picked = self.native.candidates(records, _CODES)
-        else:
-            codes = records.column("code")
-            picked = list(compress(range(len(codes)), map(_CANDIDATE, codes)))
+        codes = records.column("code")
+        picked = list(compress(range(len(codes)), map(_CANDIDATE, codes)))
         if not picked:
             return
         pending = self.pending
@@ -79,11 +85,6 @@ class CyclesListener(Listener):
                 pending.append((found.bus, found.device, (found.seq, COMMAND, found.t, found)))
 
     def on_states(self, samples: SampleSequence) -> None:
-        if self.native is not None:
-            self.native.feed(samples, self.pending)
-            self.pending = []
-            self._write(self._built(self.native.take()))
-            return
         readings: dict[tuple[str, int], list[Event]] = {}
         holder = self.segmenter.holder
         for bus, device, names, times, seqs, columns in samples.series(FIELDS):
@@ -107,25 +108,16 @@ class CyclesListener(Listener):
     def close(self) -> None:
         self._flush()
         if self.native is not None:
-            self._write(self._built(self.native.finish()))
+            self._write(self.native.finish())
         else:
             self._write(self.segmenter.finish())
         self.output.close()
 
     def _flush(self) -> None:
-        if not self.pending and not (self.native is not None and self.native.waiting):
-            return
-        if self.native is not None:
-            self.native.feed(None, self.pending)
-            self._write(self._built(self.native.take()))
-        else:
+        if self.pending:
             self.segmenter.feed({}, self.pending)
             self._write(self.segmenter.take())
-        self.pending = []
-
-    @staticmethod
-    def _built(rows: list[tuple[Any, ...]]) -> list[Any]:
-        return [build_cycle(*row) for row in rows]
+            self.pending = []
 
     def _write(self, cycles: list[Any]) -> None:
         if self.device is not None:

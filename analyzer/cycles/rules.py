@@ -364,8 +364,8 @@ def build_cycle(
     unknown: list[str],
     evidence: list[int],
 ) -> Cycle:
-    """A decided cycle as the outputs write it (``Watch.cycle``'s, and the native segmenter's
-    rows: ``_native.CycleSegmenter``): openings in mm, times from the command in ms."""
+    """A decided cycle as the outputs write it: openings in mm, times from the command in ms
+    (``_native.CycleSegmenter`` makes its cycles the same way)."""
     return Cycle(
         bus=cmd.bus,
         device=device,

@@ -51,6 +51,13 @@ class Listener(ABC):
         """State samples (one per record that set a gripper's state), in stream order: a
         ``SampleSequence`` or the native ``SampleBatch`` (``column``, ``keys``, ``series``, ...)."""
 
+    def reads_tracker(self, tracker: Any) -> bool:
+        """Before the first batch, the session's tracker: a listener of states that can read
+        it directly (the native core's, whose folds a native segmenter reads without a sample)
+        keeps it and says True; it then gets no ``on_states``, and reads the tracker's last
+        folds in ``on_records`` (the session folds each run of records just before)."""
+        return False
+
     def on_event(self, event: SourceEvent) -> None:
         """A source event (opened, lost, reopened, drops, passive, ...), in time order with the
         records around it."""

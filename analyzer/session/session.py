@@ -109,6 +109,7 @@ class Session:
         self._finishing = False  # in _finish: signals are ignored, the recording must end
         self._cut_short = True  # the source did not run to its end (set when it did)
         self._named = 0  # the source's bus protocols handed to the decoding
+        self._direct: set[int] = set()  # the listeners that read the tracker itself
         # records of several buses in capture-time order (a byte stream's frames are finished
         # after CAN frames captured meanwhile); CAN input and one stream come in time order
         self._order: TimeMerge | None = None
@@ -122,10 +123,11 @@ class Session:
         if self.options.duration is not None:
             deadline = time.monotonic() + self.options.duration
         # samples cost a copy of the state per reading: made only when someone reads them
-        self.tracker.samples = any(x.wants_states for x in self.listeners)
-        self.tracker.snapshots = any(
-            x.wants_states and x.reads_whole_states for x in self.listeners
-        )
+        readers = [x for x in self.listeners if x.wants_states]
+        self._direct = {id(x) for x in readers if x.reads_tracker(self.tracker)}
+        readers = [x for x in readers if id(x) not in self._direct]
+        self.tracker.samples = bool(readers)
+        self.tracker.snapshots = any(x.reads_whole_states for x in readers)
         with _handled_by(self._on_signal), rare_gc():
             try:
                 self.source.start()  # a live source that never opens raises SourceError
@@ -262,7 +264,7 @@ class Session:
         counts.samples += len(samples)
         for listener in tuple(self.listeners):
             self._call(listener, "on_records", records)
-            if samples and listener.wants_states:
+            if samples and listener.wants_states and id(listener) not in self._direct:
                 self._call(listener, "on_states", samples)
 
     def _event(self, event: SourceEvent) -> None:

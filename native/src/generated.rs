@@ -1484,4 +1484,27 @@ pub mod cycles {
         super::tracker::MAX_OPENING,
         super::tracker::MIN_OPENING,
     ];
+
+    /// `_SERIAL`: a serial CMD's kind.
+    pub const SERIAL_COMMANDS: [(u8, &str); 5] = [
+        (0x10, CATCH),
+        (0x18, CATCH),
+        (0x11, RELEASE),
+        (0x54, MOVE),
+        (0x16, STOP),
+    ];
+    pub const MOVE: &str = "move";
+    /// `_MODBUS_WRITES`: functions that write.
+    pub const MODBUS_WRITES: [i64; 2] = [0x06, 0x10];
+    /// `_CAN_WRITE`: the write operation.
+    pub const CAN_WRITE: i64 = 1;
+    /// `CODES`: the record codes of every candidate.
+    pub const CODES: [i64; 9] = [0x01, 0x06, 0x10, 0x11, 0x16, 0x18, 0x54, 0x86, 0x90];
+    pub const TARGET: &str = "CMD_OPENLEN_SET";
+    pub const STOP_REGISTER: &str = "CMD_STOP";
+    /// `_WORDS`: a register written beside the target, in words (before and after it).
+    pub const WORDS: [(&str, &str, &str); 2] = [
+        ("CMD_SPEED_SET", "speed=", ""),
+        ("CMD_FORCE_SET", "force=", " g"),
+    ];
 }

@@ -11,17 +11,22 @@ from __future__ import annotations
 import random
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from native_core import needs_native
 
+from analyzer.cycles.listener import CyclesListener
 from analyzer.model import Item
+from analyzer.session.capture import FilteredListener
+from analyzer.session.listener import Listener
+from analyzer.session.session import Session, SessionOptions
 from decoders.model import EG2_CAN, CanFrame
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "benchmarks"))
 sys.path.insert(0, str(ROOT / "tests" / "cycles"))
-from cycle_script import BROADCAST, Script, replay  # noqa: E402
+from cycle_script import BROADCAST, Kept, Replay, Script, replay  # noqa: E402
 from traffic import can_frames, warning_can_frames  # noqa: E402
 
 pytestmark = needs_native
@@ -110,3 +115,58 @@ def test_the_random_hosts_reach_every_outcome() -> None:
         "gripped", "closed_empty", "opened", "positioned", "stopped", "faulted", "unanswered",
         "unfinished", "unknown",
     }  # fmt: skip
+
+
+class WholeStates(Listener):
+    """A listener of whole states, beside the cycles: the tracker makes samples for it."""
+
+    wants_states = True
+
+    def __init__(self) -> None:
+        self.samples = 0
+
+    def on_records(self, records: object) -> None:
+        pass
+
+    def on_states(self, samples: Any) -> None:
+        self.samples += len(samples)
+
+
+def native_session(items: list[Item], listeners: list[Listener]) -> Session:
+    session = Session(Replay(items, "can", 64), listeners, SessionOptions(engine="native"))
+    session.run()
+    return session
+
+
+def test_the_native_segmenter_reads_the_tracker_not_samples() -> None:
+    """On the native engine the segmenter reads the session's tracker itself: cycles alone
+    make no state sample, and give the Python engine's cycles."""
+    items = bench(list(can_frames(5000)))
+    reference = [c.to_dict() for c in replay(items, EG2_CAN, "python", 500)]
+    kept = Kept()
+    session = native_session(items, [CyclesListener(kept)])
+    assert session.counts.samples == 0
+    assert [c.to_dict() for c in kept.cycles] == reference
+
+
+def test_the_native_segmenter_beside_a_listener_of_samples() -> None:
+    """With a listener of whole states beside them, the samples are made for it alone and the
+    cycles stay the same."""
+    items = bench(list(can_frames(5000)))
+    reference = [c.to_dict() for c in replay(items, EG2_CAN, "python", 500)]
+    kept, whole = Kept(), WholeStates()
+    session = native_session(items, [whole, CyclesListener(kept)])
+    assert whole.samples == session.counts.samples > 0
+    assert [c.to_dict() for c in kept.cycles] == reference
+
+
+def test_cycles_behind_a_filter_read_the_native_samples() -> None:
+    """A cycles listener the session cannot hand its tracker (behind a filter) reads the native
+    samples with the Python segmenter: the same cycles."""
+    items = bench(list(can_frames(5000)))
+    reference = [c.to_dict() for c in replay(items, EG2_CAN, "python", 500)]
+    kept = Kept()
+    inner = CyclesListener(kept)
+    session = native_session(items, [FilteredListener(inner, lambda r: list(range(len(r))))])
+    assert session.counts.samples > 0 and inner.native is None
+    assert [c.to_dict() for c in kept.cycles] == reference

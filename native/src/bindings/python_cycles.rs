@@ -1,34 +1,36 @@
-//! Grip cycles for Python: `CycleSegmenter`, analyzer/cycles/segmenter.py's `Segmenter` fed a
-//! native `SampleBatch` where it is (no Python object per sample), for the cycles listener
-//! on the native engine. Commands and answers come as the Python objects the listener found
-//! (a few a batch); each ended cycle goes back as the arguments of rules.py `build_cycle`.
-//! tests/native/test_cycles_native.py requires the same cycles as the Python segmenter.
+//! Grip cycles for Python: `CycleSegmenter`, analyzer/cycles/segmenter.py's `Segmenter` for
+//! the cycles listener on the native engine, fed the commands it finds in a batch's records
+//! (native/src/cycles/commands.rs) and the readings the session's tracker kept of them, with no
+//! Python object per record or sample; each ended cycle goes back as a `Cycle`, as rules.py
+//! `build_cycle` makes it. tests/native/test_cycles_native.py requires the same cycles as the
+//! Python.
 
 use super::python_live::RecordBatch;
-use super::python_tracker::SampleBatch;
-use crate::cycles::rules::{Command, Decided};
-use crate::cycles::segmenter::{Event, Key, Reading, Segmenter, Values};
-use crate::decoders::model::RESPONSE;
-use crate::generated::cycles::FIELDS;
-use crate::generated::flags::{EXCEPTION_RESPONSE, WRITE_FAILED};
-use crate::session::tracker::{Sample, Slot};
+use super::python_tracker::PyTracker;
+use crate::cycles::commands::{event_of, Said};
+use crate::cycles::rules::Decided;
+use crate::cycles::segmenter::{Reading, Segmenter};
+use crate::decoders::registers::{fault_text, opening_mm};
+use crate::pyfloat::py_round;
+use crate::session::tracker::{DeviceState, FieldReading};
 use pyo3::exceptions::PyTypeError;
-use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyTuple};
+use pyo3::sync::GILOnceCell;
+use pyo3::types::{PyList, PyString, PyTuple, PyType};
 use pyo3::IntoPyObjectExt;
 use std::sync::Arc;
 
-type Payload = Arc<Py<PyAny>>;
+type Payload = Arc<Said>;
 
-/// `CycleSegmenter()`: `feed(samples, commands)`, `take()`, `finish()` as the Python
-/// `Segmenter`'s, `samples` a `SampleBatch` or None.
+/// `CycleSegmenter()`: the Python `Segmenter` (`feed`, `take`, `finish`) fed straight from the
+/// native session: its commands and answers found in a `RecordBatch` (commands.py), its
+/// readings from the session's `Tracker` (no Python object per record or sample).
 #[pyclass(name = "CycleSegmenter", module = "analyzer._native")]
 #[derive(Default)]
 pub struct PyCycleSegmenter {
     inner: Segmenter<Payload>,
-    /// the answers `candidates` found, for the next `feed` (commands.py `answer_of`)
-    answers: Vec<(Key, Event<Payload>)>,
+    /// the segmenter's number of each of the tracker's states (by index), once it has one
+    grippers: Vec<Option<usize>>,
 }
 
 #[pymethods]
@@ -38,169 +40,101 @@ impl PyCycleSegmenter {
         Self::default()
     }
 
-    /// One batch: its samples (None: it set no state) and the `(bus, device, event)` of its
-    /// commands and answers, `event[3]` the `Command` or `Answer`.
-    fn feed(
+    /// One batch: the commands and answers among `records`, and the readings the tracker
+    /// (its `readings` on) kept of them: the session's tracker folded these records just
+    /// before.
+    fn feed_from(
         &mut self,
-        samples: Option<PyRef<'_, SampleBatch>>,
-        commands: &Bound<'_, PyList>,
+        tracker: PyRef<'_, PyTracker>,
+        records: PyRef<'_, RecordBatch>,
     ) -> PyResult<()> {
-        let readings = match samples {
-            Some(batch) => self.readings(batch.samples())?,
-            None => Vec::new(),
-        };
-        let mut events = std::mem::take(&mut self.answers);
-        events.reserve(commands.len());
-        for item in commands.iter() {
-            let (bus, device, event): (String, i64, Bound<'_, PyTuple>) = item.extract()?;
-            events.push(((Arc::from(bus), device), event_of(&event.get_item(3)?)?));
-        }
+        let readings = tracker.with_readings(|found, states| self.readings(found, states))?;
+        let events = records.records.iter().filter_map(event_of).collect();
         self.inner.feed(readings, events);
         Ok(())
     }
 
-    /// The indexes of the records of `records` (a `RecordBatch`) whose code is one of `codes`
-    /// (`commands.CODES`) and that may carry a command, without a Python object per record;
-    /// the responses among them are the answers (commands.py `answer_of`), kept for the next
-    /// `feed`.
-    fn candidates(&mut self, records: PyRef<'_, RecordBatch>, codes: Vec<i64>) -> Vec<usize> {
-        let mut found = Vec::new();
-        for (i, rec) in records.records.iter().enumerate() {
-            if !rec.code.is_some_and(|c| codes.contains(&c)) {
-                continue;
-            }
-            if rec.direction != Some(RESPONSE) {
-                found.push(i);
-            } else if let (Some(request), Some(device)) = (rec.pair, rec.device) {
-                let answer = Event::Answer {
-                    seq: rec.seq,
-                    t: rec.t,
-                    request,
-                    refused: rec.flags.contains(&WRITE_FAILED)
-                        || rec.flags.contains(&EXCEPTION_RESPONSE),
-                    garbled: !rec.errors.is_empty(),
-                };
-                self.answers.push(((rec.bus.clone(), device), answer));
-            }
-        }
-        found
-    }
-
-    /// Whether answers wait for the next `feed`.
-    #[getter]
-    fn waiting(&self) -> bool {
-        !self.answers.is_empty()
-    }
-
     /// The cycles that ended since the last call, in the order they ended.
     fn take<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        rows(py, self.inner.take())
+        cycles(py, self.inner.take())
     }
 
     /// The end of the capture: every cycle in progress ends (in the order they began).
     fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        rows(py, self.inner.finish())
+        cycles(py, self.inner.finish())
     }
 }
 
 impl PyCycleSegmenter {
-    /// The batch's readings, in the order of its samples, their grippers numbered in the
-    /// order they first appear (made in that order, as the Python's `holder` calls make them).
-    fn readings(&mut self, samples: &[Sample]) -> PyResult<Vec<Reading>> {
-        let wanted = FIELDS.iter().fold(0u16, |m, &f| m | 1 << f);
-        let mut found: Vec<Reading> = Vec::new();
-        let mut last: Option<(&Arc<str>, i64, usize)> = None;
-        for s in samples {
-            let kind = s.changed.iter().fold(0u16, |m, f| m | 1 << f) & wanted;
-            if kind == 0 {
-                continue;
-            }
-            let gripper = match last {
-                Some((bus, device, g)) if Arc::ptr_eq(bus, &s.bus) && device == s.device => g,
+    /// The tracker's readings as the segmenter's, their grippers numbered in the order they
+    /// first appear (as the Python's `holder` calls make them).
+    fn readings(
+        &mut self,
+        found: &[FieldReading],
+        states: &[DeviceState],
+    ) -> PyResult<Vec<Reading>> {
+        let mut out = Vec::with_capacity(found.len());
+        for r in found {
+            let gripper = match self.grippers.get(r.state) {
+                Some(&Some(g)) => g,
                 _ => {
-                    let key: Key = (s.bus.clone(), s.device);
-                    self.inner.gripper(&key)
+                    let st = &states[r.state];
+                    let g = self.inner.gripper(&(st.bus.clone(), st.device));
+                    if self.grippers.len() <= r.state {
+                        self.grippers.resize(r.state + 1, None);
+                    }
+                    self.grippers[r.state] = Some(g);
+                    g
                 }
             };
-            last = Some((&s.bus, s.device, gripper));
-            let mut values: Values = [None; 7];
-            for (value, &field) in values.iter_mut().zip(FIELDS.iter()) {
-                if kind & 1 << field != 0 {
-                    *value = int_of(&s.values.slots[field])?;
-                }
-            }
-            found.push(Reading {
+            let values = r
+                .values
+                .clone()
+                .map_err(|_| PyTypeError::new_err("a gripper reading that is not an int"))?;
+            out.push(Reading {
                 gripper,
-                seq: s.seq,
-                t: s.t,
+                seq: r.seq,
+                t: r.t,
                 values,
-                kind,
+                kind: r.kind,
             });
         }
-        Ok(found)
+        Ok(out)
     }
 }
 
-/// A state value as the rules read it: an int (a bool is one) or None.
-fn int_of(slot: &Slot) -> PyResult<Option<i64>> {
-    match slot {
-        Slot::Null => Ok(None),
-        other => other
-            .as_int()
-            .map(Some)
-            .ok_or_else(|| PyTypeError::new_err("a gripper reading that is not an int")),
-    }
-}
+static CYCLE: GILOnceCell<Py<PyType>> = GILOnceCell::new();
 
-/// A `Command` or an `Answer` (analyzer/cycles/commands.py) as an event.
-fn event_of(obj: &Bound<'_, PyAny>) -> PyResult<Event<Payload>> {
-    let py = obj.py();
-    let seq: i64 = obj.getattr(intern!(py, "seq"))?.extract()?;
-    let t: Option<f64> = obj.getattr(intern!(py, "t"))?.extract()?;
-    if obj.hasattr(intern!(py, "request"))? {
-        return Ok(Event::Answer {
-            seq,
-            t,
-            request: obj.getattr(intern!(py, "request"))?.extract()?,
-            refused: obj.getattr(intern!(py, "refused"))?.extract()?,
-            garbled: obj.getattr(intern!(py, "garbled"))?.extract()?,
-        });
-    }
-    Ok(Event::Command(Command {
-        seq,
-        t,
-        kind: obj.getattr(intern!(py, "kind"))?.extract()?,
-        target: obj.getattr(intern!(py, "target"))?.extract()?,
-        fate: obj.getattr(intern!(py, "fate"))?.extract()?,
-        broadcast: obj.getattr(intern!(py, "broadcast"))?.extract()?,
-        retransmission: obj.getattr(intern!(py, "retransmission"))?.extract()?,
-        same: obj.getattr(intern!(py, "same"))?.extract()?,
-        payload: Arc::new(obj.clone().unbind()),
-    }))
-}
-
-/// Each cycle as the arguments of rules.py `build_cycle`.
-fn rows<'py>(py: Python<'py>, cycles: Vec<Decided<Payload>>) -> PyResult<Bound<'py, PyList>> {
-    let mut out = Vec::with_capacity(cycles.len());
-    for c in cycles {
-        let row = [
-            c.command.payload.clone_ref(py).into_bound(py),
+/// Each cycle as the outputs write it, an `analyzer.cycles.model.Cycle`: rules.py
+/// `build_cycle`'s (openings in mm, times from the command in ms).
+fn cycles<'py>(py: Python<'py>, done: Vec<Decided<Payload>>) -> PyResult<Bound<'py, PyList>> {
+    let cls = CYCLE.import(py, "analyzer.cycles.model", "Cycle")?;
+    let mut out = Vec::with_capacity(done.len());
+    for c in done {
+        let said = &c.command.payload;
+        let start = c.command.t;
+        let ms = |t: Option<f64>| Some(py_round((t? - start?) * 1000.0, 3));
+        let args = [
+            PyString::new(py, &said.bus).into_any(),
             c.device.into_bound_py_any(py)?,
-            c.target.into_bound_py_any(py)?,
-            c.outcome.into_bound_py_any(py)?,
-            c.end.seq.into_bound_py_any(py)?,
+            start.into_bound_py_any(py)?,
             c.end.t.into_bound_py_any(py)?,
-            c.width.into_bound_py_any(py)?,
+            c.command.seq.into_bound_py_any(py)?,
+            c.end.seq.into_bound_py_any(py)?,
+            PyString::new(py, &said.words).into_any(),
+            opening_mm(c.target).into_bound_py_any(py)?,
+            PyString::intern(py, c.outcome).into_any(),
+            c.width.map(opening_mm).into_bound_py_any(py)?,
             c.force_peak.into_bound_py_any(py)?,
-            c.contact_t.into_bound_py_any(py)?,
-            c.settle_t.into_bound_py_any(py)?,
+            ms(c.contact_t).into_bound_py_any(py)?,
+            ms(c.settle_t).into_bound_py_any(py)?,
             c.retries.into_bound_py_any(py)?,
-            c.faults.into_bound_py_any(py)?,
+            fault_text(c.faults).into_bound_py_any(py)?,
             c.warnings.into_bound_py_any(py)?,
             c.unknown.into_bound_py_any(py)?,
             c.evidence.into_bound_py_any(py)?,
         ];
-        out.push(PyTuple::new(py, row)?);
+        out.push(cls.call1(PyTuple::new(py, args)?)?);
     }
     PyList::new(py, out)
 }

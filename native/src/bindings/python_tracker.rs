@@ -24,7 +24,9 @@ use crate::decoders::model::{
 };
 use crate::hash::FastMap;
 use crate::parquet::states::StateColumns;
-use crate::session::tracker::{push_sample_json, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS};
+use crate::session::tracker::{
+    push_sample_json, DeviceState, FieldReading, Sample, Slot, Tracker, Values, SLOTS, VALUE_KEYS,
+};
 use pyo3::exceptions::{PyAttributeError, PyIndexError, PyTypeError, PyValueError};
 use pyo3::intern;
 use pyo3::prelude::*;
@@ -162,6 +164,19 @@ impl PyTracker {
         // tracker's after an exception
         self.inner.lock().unwrap_or_else(PoisonError::into_inner)
     }
+
+    /// `read` the cycle fields' readings of the last `update_many` (none unless `readings`),
+    /// with the states they index.
+    pub(super) fn with_readings<R>(
+        &self,
+        read: impl FnOnce(&[FieldReading], &[DeviceState]) -> R,
+    ) -> R {
+        let tracker = self.tracker();
+        read(
+            tracker.readings.as_deref().unwrap_or_default(),
+            tracker.states(),
+        )
+    }
 }
 
 #[pymethods]
@@ -183,6 +198,21 @@ impl PyTracker {
     #[setter]
     fn set_samples(&self, samples: Truthy) {
         self.tracker().samples = samples.0;
+    }
+
+    /// Whether each `update_many` keeps what its records set of the fields grip cycles read,
+    /// for a `CycleSegmenter` fed straight from the tracker (`feed_from`): no sample needed.
+    #[getter]
+    fn readings(&self) -> bool {
+        self.tracker().readings.is_some()
+    }
+
+    #[setter]
+    fn set_readings(&self, readings: Truthy) {
+        let mut tracker = self.tracker();
+        if readings.0 != tracker.readings.is_some() {
+            tracker.readings = readings.0.then(Vec::new);
+        }
     }
 
     /// Whether a sample holds the whole state (else the fields it changed and the counters).

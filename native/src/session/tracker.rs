@@ -17,6 +17,7 @@ use crate::decoders::eg2_serial::{cmd, RUN_STATE};
 use crate::decoders::flags::{OUT_OF_RANGE, UNANSWERED};
 use crate::decoders::model::{Fields, Record, Value, EG2_SERIAL, FRAME, REQUEST, RESPONSE};
 use crate::decoders::registers::{by_name, fault_text, opening_mm, state_text, STROKE_MM};
+use crate::generated::cycles::FIELDS as CYCLE_FIELDS;
 use crate::hash::FastMap;
 use crate::json::{push_int, push_str, push_value};
 use crate::pyfloat::{push_json_float, push_py_repr, py_round};
@@ -191,6 +192,31 @@ pub struct Sample {
     pub values: Values,
 }
 
+/// What a gripper's record set of the fields grip cycles read (`generated::cycles::FIELDS`),
+/// made by the fold itself for a segmenter fed straight from the tracker (no sample).
+#[derive(Clone, Debug)]
+pub struct FieldReading {
+    /// the gripper: its index in `Tracker::states`
+    pub state: usize,
+    pub seq: i64,
+    pub t: Option<f64>,
+    /// the fields set, as bits of their slots (`1 << slot`)
+    pub kind: u16,
+    /// the values of `FIELDS`, None where not set; `Err` for a value that is not an int
+    pub values: Result<[Option<i64>; CYCLE_FIELDS.len()], NotAnInt>,
+}
+
+/// The slots of `FIELDS` as bits.
+const CYCLE_MASK: u16 = {
+    let mut mask = 0u16;
+    let mut i = 0;
+    while i < CYCLE_FIELDS.len() {
+        mask |= 1 << CYCLE_FIELDS[i];
+        i += 1;
+    }
+    mask
+};
+
 /// Writes a state's values into the state and notes them in `changed` (the Python builds the
 /// `changed` dict and then updates the values with it: nothing between the two can fail, so
 /// writing through gives the same state).
@@ -219,6 +245,8 @@ pub struct Tracker {
     index: FastMap<(u32, i64), usize>,
     /// in the order they were first heard, as the Python dict
     states: Vec<DeviceState>,
+    /// the `FieldReading`s of the last `update_many`, when asked for (Some)
+    pub readings: Option<Vec<FieldReading>>,
 }
 
 impl Tracker {
@@ -230,6 +258,7 @@ impl Tracker {
             last_bus: 0,
             index: FastMap::default(),
             states: Vec::new(),
+            readings: None,
         }
     }
 
@@ -260,6 +289,21 @@ impl Tracker {
     pub fn update(&mut self, rec: &Record) -> Option<Sample> {
         let (i, changed) = self.fold(rec)?;
         let st = &self.states[i];
+        if let Some(readings) = &mut self.readings {
+            let kind = changed.iter().fold(0u16, |m, f| m | 1 << f) & CYCLE_MASK;
+            if kind != 0 {
+                readings.push(FieldReading {
+                    state: i,
+                    seq: rec.seq,
+                    t: rec.t,
+                    kind,
+                    values: field_values(&st.values, kind),
+                });
+            }
+        }
+        if !self.samples {
+            return None;
+        }
         Some(Sample {
             t: rec.t,
             bus: rec.bus.clone(),
@@ -284,7 +328,7 @@ impl Tracker {
         write: impl FnOnce(&DeviceState, Changed) -> R,
     ) -> Option<R> {
         let (i, changed) = self.fold(rec)?;
-        Some(write(&self.states[i], changed))
+        self.samples.then(|| write(&self.states[i], changed))
     }
 
     /// Fold one record into its gripper's state; the state's index and the fields set, when
@@ -346,19 +390,34 @@ impl Tracker {
             registers(&rec.fields, request, &mut fold);
         }
         let changed = fold.changed;
-        if changed.is_empty() || !self.samples {
-            return None;
-        }
-        Some((i, changed))
+        (!changed.is_empty()).then_some((i, changed))
     }
 
     /// The samples of a run of records, in order (`Tracker.update_many`).
     pub fn update_many(&mut self, records: &[Record], out: &mut Vec<Sample>) {
+        if let Some(readings) = &mut self.readings {
+            readings.clear();
+        }
         if self.samples {
             out.reserve(records.len()); // at most one each: no copy of the samples as it grows
         }
         out.extend(records.iter().filter_map(|rec| self.update(rec)));
     }
+}
+
+/// The values of `FIELDS` a fold set (`kind`), as the cycle rules read them: ints (a bool is
+/// one) or None.
+fn field_values(values: &Values, kind: u16) -> Result<[Option<i64>; CYCLE_FIELDS.len()], NotAnInt> {
+    let mut found = [None; CYCLE_FIELDS.len()];
+    for (value, &field) in found.iter_mut().zip(CYCLE_FIELDS.iter()) {
+        if kind & 1 << field != 0 {
+            *value = match &values.slots[field] {
+                Slot::Null => None,
+                slot => Some(slot.as_int().ok_or(NotAnInt(VALUE_KEYS[field]))?),
+            };
+        }
+    }
+    Ok(found)
 }
 
 /// `fields.get(key)` (the decoders keep a field's keys unique, as a dict's).
