@@ -85,6 +85,8 @@ class CyclesListener(Listener):
                 pending.append((found.bus, found.device, (found.seq, COMMAND, found.t, found)))
 
     def on_states(self, samples: SampleSequence) -> None:
+        if self.native is not None:
+            return  # it read the tracker in ``on_records`` (a listener around it passes these)
         readings: dict[tuple[str, int], list[Event]] = {}
         holder = self.segmenter.holder
         for bus, device, names, times, seqs, columns in samples.series(FIELDS):

@@ -331,6 +331,12 @@ class RerunListener(Listener):
 
     # -- what the session gives ------------------------------------------------------------
 
+    def reads_tracker(self, tracker: Any) -> bool:
+        """Its grip cycles read the native tracker themselves; the samples it plots still
+        come to it (False)."""
+        self._cycles.reads_tracker(tracker)
+        return False
+
     def on_states(self, samples: SampleSequence) -> None:
         """File the samples under their shapes, a column per plotted field
         (``samples.series``: a native batch makes no samples)."""

@@ -291,11 +291,6 @@ impl From<Vec<Sample>> for SampleBatch {
 }
 
 impl SampleBatch {
-    /// The samples themselves (the native cycles read them where they are).
-    pub(crate) fn samples(&self) -> &[Sample] {
-        &self.samples
-    }
-
     /// The sample at `i` (< len) as a Python object, built once.
     fn object(&self, py: Python<'_>, i: usize) -> PyResult<Py<PyAny>> {
         let slots = self

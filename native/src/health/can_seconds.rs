@@ -28,8 +28,9 @@ pub struct Second {
 pub type ErrorFrame = (usize, Option<f64>, u32, Vec<u8>);
 
 /// Places of the memo: a gripper's polls repeat within far fewer frames; a fixed table keeps
-/// the memory flat and in the cache.
-const MEMO_PLACES: usize = 1 << 10;
+/// the memory flat and in the cache (256 KiB: 8,192 places gave a 1M-frame candump log's bus
+/// load in 17% less time than 1,024, and 65,536, out of the cache, in 45% more).
+const MEMO_PLACES: usize = 1 << 13;
 
 /// `frame_bits` remembered per distinct classic frame, one frame per place (a frame that hashes
 /// to a taken place takes it over): a gripper's polls repeat, and the CRC and stuff bits of each
