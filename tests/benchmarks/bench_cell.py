@@ -136,7 +136,7 @@ def report(found: dict, protos: list[str], clock: str) -> bool:
                   f"{rss[case]:.0f} MB")  # fmt: skip
         # per run (its cases ran back to back), then the median: a neighbour's load that
         # slows one run slows both sides of its ratio
-        runs = list(zip(*(found[(proto, c)] for c in ("decode", "stats", "bare", "cycles"))))
+        runs = list(zip(*(found[(proto, c)] for c in CASES[:4]), strict=True))
         in_stats = statistics.median((s[pick] - b[pick]) / d[pick] for d, s, b, _ in runs)
         in_cycles = statistics.median(c[pick] / d[pick] - 1 for d, _, _, c in runs)
         flat = rss["stats"] - rss["bare"] <= FLAT_MB and rss["cycles"] - rss["cycles/10"] <= FLAT_MB
