@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,17 +28,29 @@ class LatencyHistogram:
 
     def add(self, ms: float, times: int = 1) -> None:
         self.count += times
-        self.max = max(self.max, ms)
-        self.buckets[int(math.log(max(ms, 1e-6)) / _LOG_STEP)] += times
+        if ms > self.max:  # NaN is never the maximum
+            self.max = ms
+        self.buckets[int(math.log(ms if ms > 1e-6 else 1e-6) / _LOG_STEP)] += times
 
     def add_many(self, values: list[float]) -> None:
         """``add`` of each value, once (a batch's, in one loop)."""
         buckets, log, top = self.buckets, math.log, self.max
         for ms in values:
-            if ms > top:
+            if ms > top:  # NaN is never the maximum, as in ``add``
                 top = ms
             buckets[int(log(ms if ms > 1e-6 else 1e-6) / _LOG_STEP)] += 1
         self.count += len(values)
+        self.max = top
+
+    def add_counted(self, counted: Counter[float]) -> None:
+        """``add(ms, n)`` of each value and count: latencies repeat (their times have a
+        resolution), so a batch's are counted first, in C, and each value is bucketed once."""
+        buckets, log, top = self.buckets, math.log, self.max
+        for ms, n in counted.items():
+            if ms > top:  # NaN is never the maximum, as in ``add``
+                top = ms
+            buckets[int(log(ms if ms > 1e-6 else 1e-6) / _LOG_STEP)] += n
+        self.count += sum(counted.values())
         self.max = top
 
     def percentile(self, p: float) -> float | None:
@@ -80,22 +93,21 @@ class Counts:
     warnings: int = 0
     latency: LatencyHistogram = field(default_factory=LatencyHistogram)
 
-    def add(self, rec: Record) -> None:
-        if rec.direction == REQUEST:
-            self.requests += 1
-            flags = rec.flags
+    def add_group(self, direction: str | None, flags: tuple[str, ...], errors: bool,
+                  warnings: bool, n: int) -> None:  # fmt: skip
+        """``n`` frames alike (``StatsGroup``): their direction, flags, errors and warnings."""
+        if direction == REQUEST:
+            self.requests += n
             if UNANSWERED in flags:
-                self.unanswered += 1
+                self.unanswered += n
             if RETRANSMISSION in flags:
-                self.retransmissions += 1
-        elif rec.direction == RESPONSE:
-            self.responses += 1
-            if rec.latency_ms is not None:
-                self.latency.add(rec.latency_ms)
-        if rec.errors:
-            self.errors += 1
-        if rec.warnings:
-            self.warnings += 1
+                self.retransmissions += n
+        elif direction == RESPONSE:
+            self.responses += n
+        if errors:
+            self.errors += n
+        if warnings:
+            self.warnings += n
 
     def merge(self, other: Counts) -> None:
         for name in COUNT_NAMES:
@@ -137,39 +149,48 @@ class CaptureStats:
             total.merge(counts)
         return total
 
-    def add(self, rec: Record) -> None:
-        self.records += 1
-        t = rec.t
-        if t is not None:  # the span of the capture: records of several buses come per bus
-            if self.first_t is None or t < self.first_t:
-                self.first_t = t
-            if self.last_t is None or t > self.last_t:
-                self.last_t = t
-        self.by_protocol[rec.protocol] += 1
-        if rec.kind == GARBAGE:
-            self.bytes_garbage += rec.length
-        elif rec.kind == TRUNCATED:
-            self.truncated += 1
-        elif rec.kind == FRAME:
-            self.frames += 1
-            if not rec.errors:
-                self.valid += 1
-        if rec.flags:
-            self.flags.update(rec.flags)
-        if rec.device is None or rec.kind != FRAME:
-            return
-        dev_key = (rec.bus, rec.protocol, rec.device)
-        counts = self.devices.get(dev_key)
+    def add_groups(self, found: StatsGroups) -> None:
+        """A batch's records, grouped (``stats_groups``, or a native ``RecordBatch``'s)."""
+        groups, latencies, first, last = found
+        if first is not None and (self.first_t is None or first < self.first_t):
+            self.first_t = first
+        if last is not None and (self.last_t is None or last > self.last_t):
+            self.last_t = last
+        for group in groups:
+            protocol, kind, bus, device, command, direction, flags, errors, warns, n, size = group
+            self.records += n
+            self.by_protocol[protocol] += n
+            if kind == GARBAGE:
+                self.bytes_garbage += size
+            elif kind == TRUNCATED:
+                self.truncated += n
+            elif kind == FRAME:
+                self.frames += n
+                if not errors:
+                    self.valid += n
+            for flag in flags:
+                self.flags[flag] += n
+            if bus is None or device is None:
+                continue
+            self._counts(self.devices, (bus, protocol, device)).add_group(
+                direction, flags, errors, warns, n
+            )
+            self._counts(self.commands, (bus, protocol, device, command)).add_group(
+                direction, flags, errors, warns, n
+            )
+            if direction == REQUEST and UNANSWERED in flags:
+                self.unanswered_ids.setdefault((bus, protocol), set()).add(device)
+        for bus, protocol, device, command, values in latencies:
+            counted = Counter(values)
+            self.devices[(bus, protocol, device)].latency.add_counted(counted)
+            self.commands[(bus, protocol, device, command)].latency.add_counted(counted)
+
+    @staticmethod
+    def _counts(table: dict[Any, Counts], key: Any) -> Counts:
+        counts = table.get(key)
         if counts is None:
-            counts = self.devices[dev_key] = Counts()
-        counts.add(rec)
-        cmd_key = (*dev_key, rec.name or f"code {rec.code}")
-        cmd = self.commands.get(cmd_key)
-        if cmd is None:
-            cmd = self.commands[cmd_key] = Counts()
-        cmd.add(rec)
-        if rec.direction == REQUEST and UNANSWERED in rec.flags:
-            self.unanswered_ids.setdefault((rec.bus, rec.protocol), set()).add(rec.device)
+            counts = table[key] = Counts()
+        return counts
 
     def add_event(self, event: SourceEvent) -> None:
         self.events[event.kind] += event.count
@@ -209,3 +230,50 @@ class CaptureStats:
             "events": dict(self.events.most_common()),
             "notes": self.scans(),
         }
+
+
+#: records alike for the counts (``stats_groups``): protocol, kind; for a device's frame its bus,
+#: device, command (its name, or "code N") and direction, else four Nones; flags; whether it has
+#: errors, and warnings; how many records, and the bytes they span (``length``)
+StatsGroup = tuple[
+    str, str, str | None, int | None, str | None, str | None, tuple[str, ...], bool, bool, int, int
+]
+#: a batch's groups in the order each first appears; the response latencies per device and
+#: command, in record order; the earliest and latest time (NaN left out)
+StatsGroups = tuple[
+    list[StatsGroup], list[tuple[str, str, int, str, list[float]]], float | None, float | None
+]
+
+
+def stats_groups(records: Iterable[Record]) -> StatsGroups:
+    """The records grouped for ``CaptureStats.add_groups``: what it counts of each record, a
+    group at a time (the native ``RecordBatch.stats_groups`` gives the same, with no Python
+    object per record)."""
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    latencies: dict[tuple[str, str, int, str], list[float]] = {}
+    first: float | None = None
+    last: float | None = None
+    for rec in records:
+        t = rec.t
+        if t is not None and t == t:  # NaN is no time
+            if first is None or t < first:
+                first = t
+            if last is None or t > last:
+                last = t
+        device: tuple[Any, ...] = (None, None, None, None)
+        if rec.kind == FRAME and rec.device is not None:
+            command = rec.name or f"code {rec.code}"
+            device = (rec.bus, rec.device, command, rec.direction)
+            if rec.direction == RESPONSE and rec.latency_ms is not None:
+                key = (rec.bus, rec.protocol, rec.device, command)
+                latencies.setdefault(key, []).append(rec.latency_ms)
+        group = (rec.protocol, rec.kind, *device, tuple(rec.flags), bool(rec.errors),
+                 bool(rec.warnings))  # fmt: skip
+        tally = groups.get(group)
+        if tally is None:
+            groups[group] = [1, rec.length]
+        else:
+            tally[0] += 1
+            tally[1] += rec.length
+    rows = [(*key, n, length) for key, (n, length) in groups.items()]
+    return rows, [(*key, values) for key, values in latencies.items()], first, last

@@ -62,7 +62,7 @@ class CyclesListener(Listener):
         if _native is None or not isinstance(tracker, _native.Tracker):
             return False
         tracker.readings = True
-        self.native = _native.CycleSegmenter()
+        self.native = _native.CycleSegmenter(counts=self.output.counts_only)
         self.tracker = tracker
         return True
 
@@ -71,7 +71,7 @@ class CyclesListener(Listener):
             self.output.t0 = records[0].t
         if self.native is not None:  # this batch's commands, answers and readings at once
             self.native.feed_from(self.tracker, records)
-            self._write(self.native.take())
+            self._write_native(self.native.take())
             return
         self._flush()  # the last batch's commands: it set no state
         codes = records.column("code")
@@ -110,7 +110,7 @@ class CyclesListener(Listener):
     def close(self) -> None:
         self._flush()
         if self.native is not None:
-            self._write(self.native.finish())
+            self._write_native(self.native.finish())
         else:
             self._write(self.segmenter.finish())
         self.output.close()
@@ -120,6 +120,18 @@ class CyclesListener(Listener):
             self.segmenter.feed({}, self.pending)
             self._write(self.segmenter.take())
             self.pending = []
+
+    def _write_native(self, ended: list[Any]) -> None:
+        """The native segmenter's ended cycles: counted (``counts_of``) for an output that
+        only counts them, ``Cycle``s otherwise."""
+        if not self.output.counts_only:
+            self._write(ended)
+            return
+        if self.device is not None:
+            ended = [counts for counts in ended if counts[1] == self.device]
+        if ended:
+            self.count += sum(len(counts[2]) for counts in ended)
+            self.output.write_counts(ended)
 
     def _write(self, cycles: list[Any]) -> None:
         if self.device is not None:

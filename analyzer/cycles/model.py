@@ -98,4 +98,25 @@ class Cycle:
         return round((self.end_t - self.start_t) * 1000.0, 3)
 
 
+#: one gripper's cycles among some, counted (``counts_of``): bus, device, each cycle's outcome,
+#: and the cycle times and settle times known (``Cycle.duration_ms``, ``Cycle.settle_ms``)
+CycleCounts = tuple[str, int, list[str], list[float], list[float]]
+
+
+def counts_of(cycles: list[Cycle]) -> list[CycleCounts]:
+    """The cycles counted per gripper, the grippers in the order they first appear (the native
+    segmenter's ``counts`` give the same; all ``eg2scope stats`` needs of them)."""
+    found: dict[tuple[str, int], CycleCounts] = {}
+    for c in cycles:
+        counts = found.get((c.bus, c.device))
+        if counts is None:
+            counts = found[(c.bus, c.device)] = (c.bus, c.device, [], [], [])
+        counts[2].append(c.outcome)
+        if (duration := c.duration_ms) is not None:
+            counts[3].append(duration)
+        if c.settle_ms is not None:
+            counts[4].append(c.settle_ms)
+    return list(found.values())
+
+
 KEYS: Final = tuple(Cycle("", 0, None, None, 0, 0, "", None, "").to_dict())

@@ -12,7 +12,7 @@ from typing import IO, Any, Final
 
 import orjson
 
-from .model import KEYS, Cycle
+from .model import KEYS, Cycle, CycleCounts
 
 FORMATS: Final = ("text", "jsonl", "csv", "parquet")
 BINARY: Final = frozenset({"jsonl", "parquet"})
@@ -25,8 +25,15 @@ class CycleOutput:
 
     label = "cycles output"
     t0: float | None = None
+    #: it counts cycles, no more: the listener may call ``write_counts`` instead of ``write``
+    #: (the native segmenter then makes no ``Cycle`` for it)
+    counts_only = False
 
     def write(self, cycles: list[Cycle]) -> None:
+        raise NotImplementedError
+
+    def write_counts(self, counts: list[CycleCounts]) -> None:
+        """``write``'s cycles as ``counts_of`` counts them (for a ``counts_only`` output)."""
         raise NotImplementedError
 
     def flush(self) -> None:

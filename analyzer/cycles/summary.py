@@ -7,7 +7,7 @@ from collections import Counter
 from typing import Any
 
 from ..stats import LatencyHistogram
-from .model import OUTCOMES, Cycle
+from .model import OUTCOMES, Cycle, CycleCounts, counts_of
 from .outputs import CycleOutput
 
 _COUNT_AT = 4096  # cycles
@@ -42,35 +42,39 @@ class CycleSummary(CycleOutput):
     """The cycles of every gripper counted (``stats --format json``'s ``cycles``)."""
 
     label = "cycle statistics"
+    counts_only = True
 
     def __init__(self) -> None:
         self.grippers: dict[tuple[str, int], GripperCycles] = {}
         # what is not counted yet, a few thousand cycles at most: counted in bulk, which
-        # costs a fraction of counting each cycle as it comes (a few a batch)
-        self._pending: list[tuple[str, int, str, float | None, float | None]] = []
+        # costs a fraction of counting a batch's few cycles of each gripper as they come
+        self._pending: dict[tuple[str, int], tuple[list[str], list[float], list[float]]] = {}
+        self._pending_cycles = 0
 
     def write(self, cycles: list[Cycle]) -> None:
-        self._pending += [(c.bus, c.device, c.outcome, c.duration_ms, c.settle_ms) for c in cycles]
-        if len(self._pending) >= _COUNT_AT:
+        self.write_counts(counts_of(cycles))
+
+    def write_counts(self, counts: list[CycleCounts]) -> None:
+        pending = self._pending
+        for bus, device, outcomes, durations, settles in counts:
+            found = pending.get((bus, device))
+            if found is None:
+                pending[(bus, device)] = (outcomes, durations, settles)
+            else:
+                found[0].extend(outcomes)
+                found[1].extend(durations)
+                found[2].extend(settles)
+            self._pending_cycles += len(outcomes)
+        if self._pending_cycles >= _COUNT_AT:
             self._count()
 
     def _count(self) -> None:
-        by_gripper: dict[tuple[str, int], tuple[list[str], list[float], list[float]]] = {}
-        for bus, device, outcome, duration, settle in self._pending:
-            found = by_gripper.get((bus, device))
-            if found is None:
-                found = by_gripper[(bus, device)] = ([], [], [])
-            found[0].append(outcome)
-            if duration is not None:
-                found[1].append(duration)
-            if settle is not None:
-                found[2].append(settle)
-        self._pending = []
-        for key, (outcomes, durations, settles) in by_gripper.items():
+        for key, (outcomes, durations, settles) in self._pending.items():
             gripper = self.grippers.get(key)
             if gripper is None:
                 gripper = self.grippers[key] = GripperCycles()
             gripper.add(outcomes, durations, settles)
+        self._pending, self._pending_cycles = {}, 0
 
     def as_list(self) -> list[dict[str, Any]]:
         """One object per gripper, by bus and device."""

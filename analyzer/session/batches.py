@@ -29,6 +29,7 @@ import orjson
 from decoders.model import CanFrame, Record
 
 from ..model import StateSample, json_default
+from ..stats import StatsGroups, stats_groups
 from .engine import ENGINES, _native
 from .stage import Decoding
 from .tracker import Tracker
@@ -184,6 +185,9 @@ class RecordSequence(list[Record]):
     def problems(self) -> list[int]:
         """The indexes of the records that have errors or warnings."""
         return [i for i, r in enumerate(self) if r.errors or r.warnings]
+
+    def stats_groups(self) -> StatsGroups:
+        return stats_groups(self)
 
     def take(self, indexes: Sequence[int]) -> RecordSequence:
         """The records at ``indexes``, in that order, as a sequence of this kind."""

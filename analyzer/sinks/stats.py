@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
-from decoders.model import Record
+from typing import TYPE_CHECKING
 
 from ..model import SourceEvent
 from ..session.listener import Listener
 from ..stats import CaptureStats
+
+if TYPE_CHECKING:
+    from ..session.batches import RecordSequence
 
 
 class StatsListener(Listener):
@@ -16,10 +17,8 @@ class StatsListener(Listener):
         self.stats = CaptureStats()
         self.label = "statistics"
 
-    def on_records(self, records: Sequence[Record]) -> None:
-        add = self.stats.add
-        for rec in records:
-            add(rec)
+    def on_records(self, records: RecordSequence) -> None:
+        self.stats.add_groups(records.stats_groups())
 
     def on_event(self, event: SourceEvent) -> None:
         self.stats.add_event(event)

@@ -34,6 +34,7 @@ from analyzer.session.capture import CaptureOptions, FilteredListener
 from analyzer.session.listener import Listener, make_listener
 from analyzer.session.parallel import resumed
 from analyzer.sources.capture import open_capture
+from analyzer.stats import stats_groups
 from decoders.model import EG2_SERIAL, MODBUS_RTU, Record
 
 CAPTURES = Path(__file__).resolve().parents[2] / "captures"
@@ -101,6 +102,7 @@ def check_records(records: Any) -> None:
     assert records.jsonl() == b"".join(orjson.dumps(r.to_dict()) + b"\n" for r in objects)
     rows = records.rerun_log_rows(_POLL_LIST, _QUIET_LIST)
     assert rows == records_log_rows(objects, POLLS, QUIET_FLAGS)
+    assert records.stats_groups() == stats_groups(objects)
 
 
 def check_samples(samples: Any) -> None:

@@ -17,6 +17,8 @@ import pytest
 from native_core import needs_native
 
 from analyzer.cycles.listener import CyclesListener
+from analyzer.cycles.model import Cycle, CycleCounts, counts_of
+from analyzer.cycles.outputs import CycleOutput
 from analyzer.model import Item
 from analyzer.session.capture import FilteredListener
 from analyzer.session.listener import Listener
@@ -170,3 +172,39 @@ def test_cycles_behind_a_filter_read_the_native_samples() -> None:
     session = native_session(items, [FilteredListener(inner, lambda r: list(range(len(r))))])
     assert session.counts.samples > 0 and inner.native is None
     assert [c.to_dict() for c in kept.cycles] == reference
+
+
+class Counted(CycleOutput):
+    """An output that only counts (as ``stats``' does): the native segmenter hands it counts."""
+
+    counts_only = True
+
+    def __init__(self) -> None:
+        self.found: dict[tuple[str, int], tuple[list[str], list[float], list[float]]] = {}
+
+    def write(self, cycles: list[Cycle]) -> None:
+        self.write_counts(counts_of(cycles))
+
+    def write_counts(self, counts: list[CycleCounts]) -> None:
+        for bus, device, outcomes, durations, settles in counts:
+            mine = self.found.setdefault((bus, device), ([], [], []))
+            for kept, more in zip(mine, (outcomes, durations, settles), strict=True):
+                kept += more
+
+
+@pytest.mark.parametrize("name", ["random-host-0", "random-host-3", "bench", "two-buses"])
+@pytest.mark.parametrize("device", [None, 2])
+def test_native_counts_equal_the_python_cycles_counted(name: str, device: int | None) -> None:
+    """An output that only counts gets from the native segmenter, in any batch size, what
+    ``counts_of`` counts of the Python engine's cycles (and of one gripper's, with a device);
+    no ``Cycle`` is made for it."""
+    items = INPUTS[name]()
+    reference = [c for c in replay(items, EG2_CAN, "python", 500) if device in (None, c.device)]
+    expected = {(bus, dev): rest for bus, dev, *rest in counts_of(reference)}
+    assert all(outcomes and durations for outcomes, durations, _ in expected.values())
+    for size in (1, 64, 2000):
+        counted = Counted()
+        listener = CyclesListener(counted, device)
+        Session(Replay(items, "can", size), [listener], SessionOptions(engine="native")).run()
+        assert listener.native is not None and listener.count == len(reference)
+        assert {key: list(found) for key, found in counted.found.items()} == expected, size

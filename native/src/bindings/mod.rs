@@ -23,11 +23,12 @@ use std::path::PathBuf;
 
 mod python_arrow; // ArrowRun: records as Arrow columns for the Parquet output
 mod python_bytes; // ByteStage: the session's decoding of one byte stream (a raw dump)
-mod python_cycles; // CycleSegmenter: grip cycles from a SampleBatch, analyzer/cycles/segmenter.py
+mod python_cycles; // CycleSegmenter: grip cycles from a RecordBatch and the Tracker
 mod python_frames; // CandumpFrames, FrameBatch: a candump log's frames for the native session
 mod python_health; // can_seconds: CAN frames per bus and second, for the bus load
 mod python_live; // CanStage, RecordBatch, can_raw_messages: the live CAN path
 mod python_rerun; // RecordBatch.rerun_log_rows: what a plot's logs show of a RecordBatch
+mod python_stats; // RecordBatch.stats_groups: a batch's records grouped for `eg2scope stats`
 mod python_tracker; // Tracker, SampleBatch: the live state tracker
 
 create_exception!(

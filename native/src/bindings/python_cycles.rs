@@ -2,8 +2,9 @@
 //! the cycles listener on the native engine, fed the commands it finds in a batch's records
 //! (native/src/cycles/commands.rs) and the readings the session's tracker kept of them, with no
 //! Python object per record or sample; each ended cycle goes back as a `Cycle`, as rules.py
-//! `build_cycle` makes it. tests/native/test_cycles_native.py requires the same cycles as the
-//! Python.
+//! `build_cycle` makes it (or, made with `counts=True`, counted as model.py `counts_of` counts
+//! them: all `stats` needs).
+//! tests/native/test_cycles_native.py requires the same cycles as the Python.
 
 use super::python_live::RecordBatch;
 use super::python_tracker::PyTracker;
@@ -22,7 +23,7 @@ use std::sync::Arc;
 
 type Payload = Arc<Said>;
 
-/// `CycleSegmenter()`: the Python `Segmenter` (`feed`, `take`, `finish`) fed straight from the
+/// `CycleSegmenter(counts=False)`: the Python `Segmenter` (`feed`, `take`, `finish`) fed straight from the
 /// native session: its commands and answers found in a `RecordBatch` (commands.py), its
 /// readings from the session's `Tracker` (no Python object per record or sample).
 #[pyclass(name = "CycleSegmenter", module = "analyzer._native")]
@@ -31,13 +32,19 @@ pub struct PyCycleSegmenter {
     inner: Segmenter<Payload>,
     /// the segmenter's number of each of the tracker's states (by index), once it has one
     grippers: Vec<Option<usize>>,
+    /// the ended cycles counted per gripper (model.py `counts_of`), no `Cycle` made
+    counts: bool,
 }
 
 #[pymethods]
 impl PyCycleSegmenter {
     #[new]
-    fn new() -> Self {
-        Self::default()
+    #[pyo3(signature = (counts = false))]
+    fn new(counts: bool) -> Self {
+        Self {
+            counts,
+            ..Self::default()
+        }
     }
 
     /// One batch: the commands and answers among `records`, and the readings the tracker
@@ -56,16 +63,31 @@ impl PyCycleSegmenter {
 
     /// The cycles that ended since the last call, in the order they ended.
     fn take<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        cycles(py, self.inner.take())
+        let done = self.inner.take();
+        self.hand_back(py, done)
     }
 
     /// The end of the capture: every cycle in progress ends (in the order they began).
     fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        cycles(py, self.inner.finish())
+        let done = self.inner.finish();
+        self.hand_back(py, done)
     }
 }
 
 impl PyCycleSegmenter {
+    /// Ended cycles for Python: `Cycle`s, or their counts.
+    fn hand_back<'py>(
+        &self,
+        py: Python<'py>,
+        done: Vec<Decided<Payload>>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        if self.counts {
+            counts_of(py, done)
+        } else {
+            cycles(py, done)
+        }
+    }
+
     /// The tracker's readings as the segmenter's, their grippers numbered in the order they
     /// first appear (as the Python's `holder` calls make them).
     fn readings(
@@ -105,6 +127,42 @@ impl PyCycleSegmenter {
 
 static CYCLE: GILOnceCell<Py<PyType>> = GILOnceCell::new();
 
+/// The milliseconds from `start` to `t`, as model.py rounds them.
+fn ms_from(start: Option<f64>, t: Option<f64>) -> Option<f64> {
+    Some(py_round((t? - start?) * 1000.0, 3))
+}
+
+/// model.py `counts_of`: per gripper, in the order they first appear, `(bus, device, outcomes,
+/// durations, settles)`, the times those known.
+fn counts_of<'py>(py: Python<'py>, done: Vec<Decided<Payload>>) -> PyResult<Bound<'py, PyList>> {
+    type Counts<'a> = (&'a str, i64, Vec<&'static str>, Vec<f64>, Vec<f64>);
+    let mut found: Vec<Counts<'_>> = Vec::new();
+    for c in &done {
+        let bus: &str = &c.command.payload.bus;
+        let at = match found.iter().position(|f| f.0 == bus && f.1 == c.device) {
+            Some(at) => at,
+            None => {
+                found.push((bus, c.device, Vec::new(), Vec::new(), Vec::new()));
+                found.len() - 1
+            }
+        };
+        let counts = &mut found[at];
+        let start = c.command.t;
+        counts.2.push(c.outcome);
+        counts.3.extend(ms_from(start, c.end.t));
+        counts.4.extend(ms_from(start, c.settle_t));
+    }
+    let mut out = Vec::with_capacity(found.len());
+    for (bus, device, outcomes, durations, settles) in found {
+        let outcomes: Vec<_> = outcomes
+            .into_iter()
+            .map(|o| PyString::intern(py, o))
+            .collect();
+        out.push((bus, device, outcomes, durations, settles).into_pyobject(py)?);
+    }
+    PyList::new(py, out)
+}
+
 /// Each cycle as the outputs write it, an `analyzer.cycles.model.Cycle`: rules.py
 /// `build_cycle`'s (openings in mm, times from the command in ms).
 fn cycles<'py>(py: Python<'py>, done: Vec<Decided<Payload>>) -> PyResult<Bound<'py, PyList>> {
@@ -113,7 +171,7 @@ fn cycles<'py>(py: Python<'py>, done: Vec<Decided<Payload>>) -> PyResult<Bound<'
     for c in done {
         let said = &c.command.payload;
         let start = c.command.t;
-        let ms = |t: Option<f64>| Some(py_round((t? - start?) * 1000.0, 3));
+        let ms = |t: Option<f64>| ms_from(start, t);
         let args = [
             PyString::new(py, &said.bus).into_any(),
             c.device.into_bound_py_any(py)?,

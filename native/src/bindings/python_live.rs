@@ -625,6 +625,11 @@ impl RecordBatch {
         let py = slf.py();
         super::python_rerun::rerun_log_rows(py, slf, polls, quiet)
     }
+
+    /// analyzer/stats.py `stats_groups` of the records (python_stats.rs).
+    fn stats_groups<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        super::python_stats::stats_groups(py, &self.records)
+    }
 }
 
 /// The iterator of a RecordBatch (by index, as a list's: records appended meanwhile are seen

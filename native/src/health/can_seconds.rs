@@ -28,19 +28,24 @@ pub struct Second {
 pub type ErrorFrame = (usize, Option<f64>, u32, Vec<u8>);
 
 /// Places of the memo: a gripper's polls repeat within far fewer frames; a fixed table keeps
-/// the memory flat and in the cache (256 KiB: 8,192 places gave a 1M-frame candump log's bus
-/// load in 28% less time than 1,024, and 65,536, out of the cache, in 45% more).
-const MEMO_PLACES: usize = 1 << 13;
+/// the memory flat and in the cache (256 KiB: 16,384 places of 16 bytes).
+const MEMO_PLACES: usize = 1 << 14;
 
 /// `frame_bits` remembered per distinct classic frame, one frame per place (a frame that hashes
 /// to a taken place takes it over): a gripper's polls repeat, and the CRC and stuff bits of each
 /// would cost more than the rest of the count.
 #[derive(Default)]
 pub struct BitsMemo {
-    /// (key, bits) by the key's hash; key 0: an empty place (`memo_key` is never 0). Made on
-    /// first use: a memo handed on (`std::mem::take`) leaves an empty one, which costs nothing
-    places: Vec<(u128, Option<u32>)>,
+    /// by the key's hash, the key with its bits in `BITS_FIELD`; 0: an empty place
+    /// (`memo_key` is never 0). Made on first use: a memo handed on (`std::mem::take`) leaves
+    /// an empty one, which costs nothing
+    places: Vec<u128>,
 }
+
+/// Where a place keeps the bits of its key's frame, plus one (0: not counted): bits no field of
+/// a key uses, so that a place is one number, 16 bytes.
+const BITS_SHIFT: u32 = 81;
+const BITS_FIELD: u128 = 0x1FF << BITS_SHIFT;
 
 impl BitsMemo {
     /// `frame_bits` of `frame`, None for a frame whose bits are not counted.
@@ -49,15 +54,20 @@ impl BitsMemo {
             return frame_bits(frame).ok();
         };
         if self.places.is_empty() {
-            self.places = vec![(0, None); MEMO_PLACES];
+            self.places = vec![0; MEMO_PLACES];
         }
         let mut hasher = FastHasher::default();
         hasher.write_u128(key);
         let place = &mut self.places[hasher.finish() as usize % MEMO_PLACES];
-        if place.0 != key {
-            *place = (key, frame_bits(frame).ok());
+        if *place & !BITS_FIELD != key {
+            // a classic frame has at most 160 bits: they fit the field
+            let code = frame_bits(frame).map_or(0, |b| u128::from(b.min(0x1FE)) + 1);
+            *place = key | code << BITS_SHIFT;
         }
-        place.1
+        match (*place & BITS_FIELD) >> BITS_SHIFT {
+            0 => None,
+            code => Some(code as u32 - 1),
+        }
     }
 }
 
@@ -85,6 +95,17 @@ fn memo_key(frame: &CanFrame) -> Option<u128> {
             | flags << 72
             | u128::from(frame.arbitration_id) << 96,
     )
+}
+
+/// `floor(t)` of a finite time, without the call to libm's `floor` that the default x86-64
+/// target makes of `f64::floor` (a million frames a second).
+fn whole_second(t: f64) -> i64 {
+    let s = t as i64; // towards zero
+    if (s as f64) > t {
+        s - 1
+    } else {
+        s
+    }
 }
 
 /// The seconds and error frames of a run of frames, in the order each first appears.
@@ -116,7 +137,7 @@ impl SecondsCount {
             return;
         }
         let bits = self.memo.bits(frame);
-        let key = (bus, t.map(|t| t.floor() as i64));
+        let key = (bus, t.map(whole_second));
         let at = match self.last {
             Some((last, at)) if last == key => at,
             _ => self.place(key, t, bits),
@@ -190,14 +211,30 @@ mod tests {
             ..f.clone()
         });
         frames.extend(standard.collect::<Vec<_>>());
+        let mut widest = frame(None, &[0xFF; 8]);
+        (widest.arbitration_id, widest.is_extended, widest.dlc) = (0x1FFF_FFFF, true, Some(15));
+        frames.push(widest);
+        let field = |f: &CanFrame| memo_key(f).map_or(0, |k| k & BITS_FIELD);
+        assert!(
+            frames.iter().all(|f| field(f) == 0),
+            "no key uses the field"
+        );
         for _ in 0..2 {
             for f in &frames {
                 assert_eq!(memo.bits(f), frame_bits(f).ok());
             }
         }
-        let taken = memo.places.iter().filter(|p| p.0 != 0).count();
-        assert_eq!(taken, 10); // all but the 12 data bytes, each in a place of its own
-        assert_eq!(frames.iter().filter(|f| memo.bits(f).is_some()).count(), 5);
+        let taken = memo.places.iter().filter(|p| **p != 0).count();
+        assert_eq!(taken, 11); // all but the 12 data bytes, each in a place of its own
+        assert_eq!(frames.iter().filter(|f| memo.bits(f).is_some()).count(), 6);
+    }
+
+    #[test]
+    fn whole_seconds_are_floors() {
+        let times = [0.0, -0.0, 0.5, -0.5, -1.0, 1.0, 1e9 + 0.999, -1e9 - 0.001];
+        for t in times.into_iter().chain([1_763_700_000.25]) {
+            assert_eq!(whole_second(t), t.floor() as i64, "{t}");
+        }
     }
 
     #[test]
