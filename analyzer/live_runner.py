@@ -21,7 +21,7 @@ from .model import SourceEvent
 from .outfile import check_new_file
 from .session.capture import exit_code
 from .session.listener import Listener, make_listener
-from .session.session import Session, SessionOptions
+from .session.session import Session, SessionOptions, session_parts
 from .sinks.text import format_event, use_colour
 from .sources.live import Tap
 from .sources.naming import BUS_BY_PROTOCOL
@@ -40,7 +40,8 @@ class LiveOptions:
     or None: detected per stream); ``output``: the MCAP file to record (None: no recording);
     ``force``: replace that file if it is there; ``duration``: seconds until the session stops
     (None: until the user stops it); ``queue_size``: items buffered between capture and
-    decoding; ``rerun``: a Rerun target the session also goes to (None: no plot)."""
+    decoding; ``rerun``: a Rerun target the session also goes to (None: no plot); ``engine``:
+    the session's decoding (``--engine``: a usage error where it cannot decode the sources)."""
 
     protocol: str | None
     output: str | None
@@ -48,6 +49,7 @@ class LiveOptions:
     duration: float | None
     queue_size: int
     rerun: str | None = None
+    engine: str = "auto"
 
 
 class StatusLine(Listener):
@@ -177,9 +179,14 @@ def run_session(
         per_bus=per_bus or {},
         byte_time_s=byte_times(taps),
         duration=options.duration,
+        engine=options.engine,
     )
     source = open_source(taps, options.queue_size, on_start)
     try:  # until the session runs, the source is closed here if anything fails
+        try:  # an engine that cannot decode the sources: a usage error, before any output
+            session_parts(source, session_options)
+        except ValueError as exc:
+            raise UsageError(f"--engine {options.engine}: {exc}") from None
         session = Session(source, _outputs(options, taps, show, extra), session_options)
     except BaseException:
         source.stop()

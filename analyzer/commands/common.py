@@ -234,6 +234,7 @@ def live_options(args: argparse.Namespace) -> LiveOptions:
         duration=args.duration,
         queue_size=args.queue_size,
         rerun=getattr(args, "rerun", None),
+        engine=getattr(args, "engine", "auto"),
     )
 
 
@@ -268,10 +269,10 @@ def add_replay_arguments(parser: argparse.ArgumentParser, unpaced: str, same: st
         "--engine",
         choices=ENGINES,
         default="auto",
-        help="the session's decoding: auto (the native core for CAN captures and raw dumps "
-        "where it is built, else the Python decoders; default), python, or native (a usage "
-        "error where it cannot "
-        f"decode the capture). {same}",
+        help="the session's decoding, of a capture or a live source: auto (the native core for "
+        "CAN input and raw dumps where it is built, else the Python decoders; default), "
+        "python, or native (a usage error where it cannot decode the input: several byte "
+        f"streams, as live serial taps, the demo's serial lines and their recordings). {same}",
     )
 
 

@@ -141,6 +141,7 @@ def cycles_options(args: argparse.Namespace) -> CyclesOptions:
             force=False,
             duration=args.duration,
             queue_size=args.queue_size,
+            engine=args.engine,
         ),
         taps=tap_options(args),
         capture=whole_capture_options(args) if args.file else None,  # --device picks cycles

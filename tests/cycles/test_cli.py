@@ -134,6 +134,26 @@ def test_the_native_engine_says_why_not_on_serial_lines(demo_recording: Path) ->
     assert b"CAN input and single byte streams" in proc.stderr
 
 
+@needs_native
+@pytest.mark.parametrize("command", ["cycles", "plot"])
+def test_the_engine_asked_for_applies_to_the_demo(command: str, tmp_path: Path) -> None:
+    """``--engine`` holds for a live session too: the demo's serial lines are no input of the
+    native engine (a usage error before any output is made); its CAN bus alone is."""
+    out = tmp_path / ("out.jsonl" if command == "cycles" else "out.rrd")
+    where = ["-o", str(out), "--format", "jsonl"] if command == "cycles" else ["--save", str(out)]
+    live = [command, "--demo", "--engine", "native", "--duration", "2", *where]
+    proc = eg2scope(*live, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr.decode()
+    assert b"--engine native" in proc.stderr and b"CAN input" in proc.stderr
+    assert not out.exists() and not list(tmp_path.iterdir())
+    proc = eg2scope(*live, "--buses", "can", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr.decode()
+    if command == "cycles":
+        assert {c["bus"] for c in map(orjson.loads, out.read_bytes().splitlines())} == {"can0"}
+    else:
+        assert out.stat().st_size > 0
+
+
 # -- every format, read back --------------------------------------------------------------------
 
 
