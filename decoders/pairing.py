@@ -186,7 +186,7 @@ class Pairer:
                 return
             self._pending[key] = [rec]
         self._waiting.add(id(rec))
-        if rec.t is not None:
+        if rec.t is not None and rec.t == rec.t:  # a NaN time never times out (nor orders a heap)
             limit = self.save_timeout_s if rec.is_save else self.timeout_s
             due = rec.t + limit
             heapq.heappush(self._due, (due, next(self._arrival), rec.t, limit, key, rec))

@@ -149,6 +149,20 @@ def test_buses_are_paired_separately() -> None:
     assert a.pair == ra.seq and b.pair == rb.seq
 
 
+def test_a_request_without_a_number_for_its_time_never_times_out() -> None:
+    """A NaN time (a hand-edited log) never times a request out, and the requests timed
+    around it still do: it takes no place among the time-outs (a NaN there would break their
+    order, and another request's time-out would be missed after the clock went back)."""
+    nan = rec(REQUEST, 2, float("nan"), **CAN)
+    late = rec(REQUEST, 1, 10.0, **CAN)
+    back = rec(REQUEST, 3, 0.1, **CAN)  # the clock went back: a second log appended
+    answer = rec(RESPONSE, 3, 0.7, **CAN)  # 600 ms later: too late
+    out = run([nan, late, back, answer, rec(RESPONSE, 2, 20.0, **CAN)])
+    assert back.pair is None and back.flags == [UNANSWERED] and answer.flags == [ORPHAN_RESPONSE]
+    assert nan.pair is not None and not nan.flags
+    assert late.flags == [UNANSWERED] and out[0] is nan
+
+
 def test_held_records_are_bounded() -> None:
     p = Pairer(max_held=100)
     out = p.push(rec(REQUEST, 1, code=1))
