@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import random
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -68,12 +69,13 @@ def bench(frames: list[CanFrame]) -> list[Item]:
     return [Item("can0", f) for f in frames]
 
 
-def two_buses(n: int) -> list[Item]:
-    """Polls on two buses with the frames real buses also carry (foreign and standard ids,
-    error and remote frames, lost replies, frames without a time)."""
-    rng = random.Random(5)
+def on_two_buses(frames: Iterable[CanFrame], seed: int, nan: bool = False) -> list[Item]:
+    """``frames`` on two buses, with the frames real buses also carry (foreign and standard
+    ids, error and remote frames, lost replies, frames without a time; with ``nan``, some
+    with NaN for a time)."""
+    rng = random.Random(seed)
     items = []
-    for k, f in enumerate(can_frames(n, seed=5)):
+    for k, f in enumerate(frames):
         roll = rng.random()
         if roll < 0.02:
             continue
@@ -85,8 +87,15 @@ def two_buses(n: int) -> list[Item]:
             f = CanFrame(f.t, f.arbitration_id, b"", is_remote=True, dlc=4)
         elif roll < 0.06:
             f = CanFrame(None, f.arbitration_id, f.data)
+        elif nan and roll < 0.065:
+            f = CanFrame(float("nan"), f.arbitration_id, f.data)
         items.append(Item("can0" if k % 5 else "can1", f))
     return items
+
+
+def two_buses(n: int) -> list[Item]:
+    """Polls on two buses with the frames real buses also carry."""
+    return on_two_buses(can_frames(n, seed=5), seed=5)
 
 
 INPUTS = {

@@ -5,7 +5,6 @@ same whether it adds the records in one batch or in batches of any size."""
 
 from __future__ import annotations
 
-import random
 import sys
 from pathlib import Path
 from typing import Any
@@ -18,9 +17,10 @@ from analyzer.model import Item
 from analyzer.session.batches import RecordSequence, session_engine
 from analyzer.stats import CaptureStats, stats_groups
 from decoders.flags import RETRANSMISSION, UNANSWERED
-from decoders.model import EG2_SERIAL, FRAME, GARBAGE, MODBUS_RTU, TRUNCATED, CanFrame, Record
+from decoders.model import EG2_SERIAL, FRAME, GARBAGE, MODBUS_RTU, TRUNCATED, Record
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from test_cycles_native import on_two_buses  # tests/native is on sys.path
 from traffic import can_frames, warning_can_frames
 
 pytestmark = needs_native
@@ -28,28 +28,10 @@ pytestmark = needs_native
 
 def hostile_can(n: int) -> list[Item]:
     """Two buses of polls and writes, some breaking the rules, with foreign, error and remote
-    frames, lost replies and frames without a time, or with NaN for one."""
-    rng = random.Random(7)
-    items = []
-    # a second log appended: the clock goes back (with NaN times about, tests/decoders/
-    # test_pairing.py's case)
+    frames, lost replies and frames without a time, or with NaN for one; a second log appended
+    halfway (the clock goes back: with NaN times about, tests/decoders/test_pairing.py's case)."""
     frames = [*warning_can_frames(n // 2), *can_frames(n // 2, seed=3)]
-    for k, f in enumerate(frames):
-        roll = rng.random()
-        if roll < 0.02:
-            continue
-        if roll < 0.03:
-            f = CanFrame(f.t, 0x123, b"\x01\x02", False)
-        elif roll < 0.04:
-            f = CanFrame(f.t, 0x20000004, bytes(8), is_error=True)
-        elif roll < 0.05:
-            f = CanFrame(f.t, f.arbitration_id, b"", is_remote=True, dlc=4)
-        elif roll < 0.06:
-            f = CanFrame(None, f.arbitration_id, f.data)
-        elif roll < 0.065:
-            f = CanFrame(float("nan"), f.arbitration_id, f.data)
-        items.append(Item("can0" if k % 5 else "can1", f))
-    return items
+    return on_two_buses(frames, seed=7, nan=True)
 
 
 def byte_stream(protocol: str) -> list[Item]:
