@@ -19,9 +19,10 @@ from . import __version__
 from .errors import UsageError
 from .model import SourceEvent
 from .outfile import check_new_file
+from .session.batches import session_engine
 from .session.capture import exit_code
 from .session.listener import Listener, make_listener
-from .session.session import Session, SessionOptions, session_parts
+from .session.session import Session, SessionOptions
 from .sinks.text import format_event, use_colour
 from .sources.live import Tap
 from .sources.naming import BUS_BY_PROTOCOL
@@ -50,6 +51,10 @@ class LiveOptions:
     queue_size: int
     rerun: str | None = None
     engine: str = "auto"
+
+    def check_engine(self, kind: str) -> None:
+        """``check_live_engine`` of this session's engine."""
+        check_live_engine(self.engine, kind)
 
 
 class StatusLine(Listener):
@@ -183,10 +188,6 @@ def run_session(
     )
     source = open_source(taps, options.queue_size, on_start)
     try:  # until the session runs, the source is closed here if anything fails
-        try:  # an engine that cannot decode the sources: a usage error, before any output
-            session_parts(source, session_options)
-        except ValueError as exc:
-            raise UsageError(f"--engine {options.engine}: {exc}") from None
         session = Session(source, _outputs(options, taps, show, extra), session_options)
     except BaseException:
         source.stop()
@@ -198,6 +199,15 @@ def run_session(
     if on_done is not None:
         on_done(session)
     return _report(session, taps, options.output)
+
+
+def check_live_engine(engine: str, kind: str) -> None:
+    """A usage error for an engine that cannot decode a live source whose items are of ``kind``
+    (``live_kind``, ``demo_kind``): asked before anything is opened, shown or written."""
+    try:
+        session_engine(engine, kind, positional=False)
+    except ValueError as exc:
+        raise UsageError(f"--engine {engine}: {exc}") from None
 
 
 def session_protocol(name: str | None) -> str | None:

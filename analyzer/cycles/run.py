@@ -19,6 +19,7 @@ from ..session.capture import (
     run_capture,
 )
 from ..sim.demo_options import DemoOptions
+from ..sources.source import live_kind
 from ..sources.tap_options import TapOptions, make_taps
 from .listener import CyclesListener
 from .outputs import BINARY, FORMATS, CsvCycles, CycleOutput, JsonlCycles, TextCycles
@@ -80,7 +81,12 @@ def capture_cycles(opts: CyclesOptions, capture: CaptureOptions) -> int:
 
 def live_cycles(opts: CyclesOptions) -> int:
     """The cycles of a live session, each written as it ends."""
-    taps = None if opts.demo is not None else make_taps(opts.taps)  # usage errors first
+    taps = None  # usage errors first, before anything is opened or written
+    if opts.demo is not None:
+        opts.live.check_engine(opts.demo.kind)
+    else:
+        taps = make_taps(opts.taps)
+        opts.live.check_engine(live_kind(taps))
     with output_stream(opts.output, opts.fmt in BINARY) as out:
         listener = CyclesListener(make_output(opts.fmt, out), opts.device)
         if opts.demo is not None:

@@ -16,6 +16,7 @@ from ..session.listener import Listener
 from ..session.session import Session
 from ..sim.demo_options import DemoOptions
 from ..sources.capture import CaptureReader
+from ..sources.source import live_kind
 from ..sources.tap_options import TapOptions, make_taps
 from .target import RerunTarget, TargetChoice, chosen_target
 
@@ -127,8 +128,10 @@ class UnreadCapture(Listener):
 def plot_live(opts: PlotOptions) -> int:
     """A live session in Rerun: the demo's, or the taps'."""
     if opts.demo is not None:
+        opts.live.check_engine(opts.demo.kind)  # before the rig and a viewer
         return _plot_demo(opts.demo, opts)
     taps = make_taps(opts.taps)  # usage errors before a viewer opens
+    opts.live.check_engine(live_kind(taps))
     target = chosen_target(opts.target, opts.live.output)
     made: list[Any] = []  # made once the taps are open: a source that fails makes no file
     ended: list[Session] = []

@@ -76,19 +76,6 @@ class SessionCounts:
         )
 
 
-def session_parts(source: Source, options: SessionOptions) -> tuple[Any, Any]:
-    """The decoding and tracker of a session on ``source`` (ValueError: an engine asked for that
-    cannot decode it; a live command asks before it makes any output)."""
-    return session_engine(
-        options.engine,
-        source.kind,
-        source.positional,
-        options.protocol,
-        options.per_bus,
-        options.byte_time_s,
-    )
-
-
 class Session:
     """Runs one source through the decoders into listeners. ``run()`` blocks until the source
     ends, ``stop()`` is called (from any thread), the duration passes or Ctrl-C."""
@@ -102,7 +89,15 @@ class Session:
         self.source = source
         self.options = options or SessionOptions()
         self.listeners: list[Listener] = list(listeners)
-        self.decoding, self.tracker = session_parts(source, self.options)
+        opts = self.options
+        self.decoding, self.tracker = session_engine(
+            opts.engine,
+            source.kind,
+            source.positional,
+            opts.protocol,
+            opts.per_bus,
+            opts.byte_time_s,
+        )
         if isinstance(self.decoding, NativeCanDecoding) and not any(
             x.wants_raw and not x.reads_frame_batches for x in self.listeners
         ):

@@ -24,3 +24,10 @@ class DemoOptions:
     scenario: Scenario | None = None
     pace: float = 1.0
     truth: str | None = None
+
+    @property
+    def kind(self) -> str:
+        """What its taps give (``sources.source.live_kind``): frames from the CAN bus, bytes
+        from the serial lines."""
+        kinds = {"can" if bus == "can" else "bytes" for bus in self.buses}
+        return kinds.pop() if len(kinds) == 1 else "mixed"

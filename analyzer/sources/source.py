@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ..errors import SourceError
@@ -77,8 +77,7 @@ class LiveSource(Source):
 
     def __init__(self, taps: list[Tap], queue_size: int = 200_000) -> None:
         self.taps = taps
-        kinds = {_tap_kind(tap) for tap in taps}
-        self.kind = kinds.pop() if len(kinds) == 1 else "mixed"
+        self.kind = live_kind(taps)
         self.queue = TapQueue(queue_size)
         self.dropped = 0
         self.on_started: Callable[[], None] | None = None  # runs once the taps listen
@@ -161,6 +160,12 @@ class LiveSource(Source):
         return SourceEvent(
             time.time(), "*", WARNING, f"consumer fell behind: dropped {n} items", "drops", n
         )
+
+
+def live_kind(taps: Sequence[Tap]) -> str:
+    """What a live source of ``taps`` gives: "can" (frames), "bytes" or "mixed"."""
+    kinds = {_tap_kind(tap) for tap in taps}
+    return kinds.pop() if len(kinds) == 1 else "mixed"
 
 
 def _tap_kind(tap: Tap) -> str:

@@ -16,6 +16,7 @@ from ..health.rates import BusRates, RateOptions, rates_of_capture
 from ..live_runner import (
     LiveOptions,
     byte_times,
+    check_live_engine,
     check_recording_output,
     open_source,
     recorder,
@@ -28,6 +29,7 @@ from ..session.session import Session, SessionOptions, signals_call
 from ..sim.demo_options import DemoOptions
 from ..sim.rig import DemoRig
 from ..sources.live import Tap
+from ..sources.source import live_kind
 from ..sources.tap_options import TapOptions, make_taps
 from .bus_rates import live_rates
 from .notes import Notes
@@ -66,12 +68,18 @@ def run_tui(opts: TuiOptions) -> int:
     """The TUI on the session the options ask for, until the user quits; the exit status."""
     if opts.capture is not None and opts.demo is not None:
         raise UsageError("give a capture file or --demo, not both")
+    taps = None  # a usage error of the command line comes first
     if opts.capture is not None:
-        check_capture_engine(opts.capture)  # a usage error of the command line comes first
+        check_capture_engine(opts.capture)
+    elif opts.demo is not None:
+        check_live_engine(opts.engine, opts.demo.kind)
+    else:
+        taps = make_taps(opts.taps)
+        check_live_engine(opts.engine, live_kind(taps))
     require_terminal()
     notes = Notes()
     with ExitStack() as stack:
-        plan = session_plan(opts, stack, notes)
+        plan = session_plan(opts, stack, notes, taps)
         plan.notes = notes
         app = _app(plan, opts.engine)
         stop = partial(_stop_app, app)  # as 'q' does: the recording finished
@@ -83,15 +91,18 @@ def run_tui(opts: TuiOptions) -> int:
     return finish(opts, app, notes)
 
 
-def session_plan(opts: TuiOptions, stack: ExitStack, notes: Notes) -> SessionPlan:
-    """The plan of the session the options ask for (``stack`` holds what it opens)."""
+def session_plan(
+    opts: TuiOptions, stack: ExitStack, notes: Notes, taps: list[Tap] | None
+) -> SessionPlan:
+    """The plan of the session the options ask for (``stack`` holds what it opens; ``taps``:
+    the live sources, when neither a capture nor the demo)."""
     if opts.demo is not None:
         rig = stack.enter_context(DemoRig.of(opts.demo))
         extra = extra_listeners(opts, live=True, notes=notes)
         return live_plan(opts, rig.taps, rig.protocols, rig.run_hosts, extra)
     if opts.capture is not None:
         return capture_plan(opts, stack, capture_listeners(opts, notes))
-    taps = make_taps(opts.taps)
+    assert taps is not None
     return live_plan(opts, taps, {}, None, extra_listeners(opts, live=True, notes=notes))
 
 

@@ -138,15 +138,24 @@ def test_the_native_engine_says_why_not_on_serial_lines(demo_recording: Path) ->
 @pytest.mark.parametrize("command", ["cycles", "plot"])
 def test_the_engine_asked_for_applies_to_the_demo(command: str, tmp_path: Path) -> None:
     """``--engine`` holds for a live session too: the demo's serial lines are no input of the
-    native engine (a usage error before any output is made); its CAN bus alone is."""
+    native engine, a usage error before anything is opened or written (the scenario's truth
+    file kept as it was, nothing on stdout); its CAN bus alone is."""
     out = tmp_path / ("out.jsonl" if command == "cycles" else "out.rrd")
     where = ["-o", str(out), "--format", "jsonl"] if command == "cycles" else ["--save", str(out)]
-    live = [command, "--demo", "--engine", "native", "--duration", "2", *where]
-    proc = eg2scope(*live, cwd=tmp_path)
-    assert proc.returncode == 2, proc.stderr.decode()
-    assert b"--engine native" in proc.stderr and b"CAN input" in proc.stderr
-    assert not out.exists() and not list(tmp_path.iterdir())
-    proc = eg2scope(*live, "--buses", "can", cwd=tmp_path)
+    truth = tmp_path / "truth.jsonl"
+    truth.write_text("kept\n")
+    live = [command, "--demo", "--engine", "native", "--duration", "2"]
+    refused = [*live, "--scenario", "grip", "--truth", str(truth)]
+    attempts = [[*refused, *where]]
+    if command == "cycles":
+        attempts.append([*refused, "--format", "csv"])  # to stdout: not even its header
+    for argv in attempts:
+        proc = eg2scope(*argv, cwd=tmp_path)
+        assert proc.returncode == 2, proc.stderr.decode()
+        assert b"--engine native" in proc.stderr and b"CAN input" in proc.stderr
+        assert b"simulated" not in proc.stderr and not proc.stdout
+        assert truth.read_text() == "kept\n" and sorted(tmp_path.iterdir()) == [truth]
+    proc = eg2scope(*live, *where, "--buses", "can", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr.decode()
     if command == "cycles":
         assert {c["bus"] for c in map(orjson.loads, out.read_bytes().splitlines())} == {"can0"}

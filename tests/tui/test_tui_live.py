@@ -126,7 +126,7 @@ def test_a_live_session_keeps_the_newest_records_and_the_list_still_works() -> N
                 assert f"of {frames.known - frames.first:,} shown" in app.status_text()
                 # the newest response and its request, picked again if the session dropped
                 # them (1,000 records go by in well under a second) before p got there
-                for _ in range(5):
+                for _ in range(20):  # a loaded machine may take longer than 1,000 records
                     view = [frames.index_at(p) for p in range(frames.row_count)]
                     response = next(
                         i

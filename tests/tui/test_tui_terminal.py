@@ -236,13 +236,23 @@ def test_rerun_on_the_tui_writes_a_real_rrd(tmp_path: Path, inputs: dict[str, Pa
         assert {"can0", "rs232", "rs485"} <= buses, sorted(rrd.entities)
 
 
-def test_an_engine_that_cannot_apply_is_a_usage_error(inputs: dict[str, Path]) -> None:
-    """A recording of serial lines (several byte streams) is no input of the native engine."""
-    term = Terminal(tui(str(inputs["demo recording"]), "--engine", "native"))
+@pytest.mark.parametrize("source", ["recording", "demo"])
+def test_an_engine_that_cannot_apply_is_a_usage_error(
+    inputs: dict[str, Path], source: str, tmp_path: Path
+) -> None:
+    """A recording of serial lines (several byte streams) is no input of the native engine,
+    nor is the live demo on its serial lines: a usage error before the demo starts (its
+    scenario's truth file is left as it was)."""
+    truth = tmp_path / "truth.jsonl"
+    truth.write_text("kept\n")
+    demo = ["--demo", "--scenario", "grip", "--truth", str(truth)]
+    argv = [str(inputs["demo recording"])] if source == "recording" else demo
+    term = Terminal(tui(*argv, "--engine", "native"))
     term.child.expect(pexpect.EOF, timeout=30)
     term.child.close()
     assert term.child.exitstatus == 2
     assert b"--engine native" in term.child.before
+    assert truth.read_text() == "kept\n" and b"simulated" not in term.child.before
 
 
 def finished(term: Terminal, timeout: float = 30.0) -> int | None:

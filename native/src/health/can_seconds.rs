@@ -100,9 +100,9 @@ fn memo_key(frame: &CanFrame) -> Option<u128> {
 /// `floor(t)` of a finite time, without the call to libm's `floor` that the default x86-64
 /// target makes of `f64::floor` (a million frames a second).
 fn whole_second(t: f64) -> i64 {
-    let s = t as i64; // towards zero
+    let s = t as i64; // towards zero, saturating as `floor(t) as i64` does
     if (s as f64) > t {
-        s - 1
+        s.saturating_sub(1)
     } else {
         s
     }
@@ -232,7 +232,10 @@ mod tests {
     #[test]
     fn whole_seconds_are_floors() {
         let times = [0.0, -0.0, 0.5, -0.5, -1.0, 1.0, 1e9 + 0.999, -1e9 - 0.001];
-        for t in times.into_iter().chain([1_763_700_000.25]) {
+        for t in times
+            .into_iter()
+            .chain([1_763_700_000.25, -9.3e18, 9.3e18, -9.2e18])
+        {
             assert_eq!(whole_second(t), t.floor() as i64, "{t}");
         }
     }
