@@ -52,10 +52,6 @@ class LiveOptions:
     rerun: str | None = None
     engine: str = "auto"
 
-    def check_engine(self, kind: str) -> None:
-        """``check_live_engine`` of this session's engine."""
-        check_live_engine(self.engine, kind)
-
 
 class StatusLine(Listener):
     """What a recorder shows on a terminal when it prints no records: a status line with the
@@ -203,7 +199,8 @@ def run_session(
 
 def check_live_engine(engine: str, kind: str) -> None:
     """A usage error for an engine that cannot decode a live source whose items are of ``kind``
-    (``live_kind``, ``demo_kind``): asked before anything is opened, shown or written."""
+    (``sources.source.live_kind``, ``DemoOptions.kind``): asked before anything is opened,
+    shown or written."""
     try:
         session_engine(engine, kind, positional=False)
     except ValueError as exc:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import IO, Any
 
 from ..errors import UsageError
-from ..live_runner import LiveOptions, run_demo, run_session
+from ..live_runner import LiveOptions, check_live_engine, run_demo, run_session
 from ..outfile import output_stream
 from ..session.batches import session_engine
 from ..session.capture import (
@@ -83,10 +83,10 @@ def live_cycles(opts: CyclesOptions) -> int:
     """The cycles of a live session, each written as it ends."""
     taps = None  # usage errors first, before anything is opened or written
     if opts.demo is not None:
-        opts.live.check_engine(opts.demo.kind)
+        check_live_engine(opts.live.engine, opts.demo.kind)
     else:
         taps = make_taps(opts.taps)
-        opts.live.check_engine(live_kind(taps))
+        check_live_engine(opts.live.engine, live_kind(taps))
     with output_stream(opts.output, opts.fmt in BINARY) as out:
         listener = CyclesListener(make_output(opts.fmt, out), opts.device)
         if opts.demo is not None:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import EXIT_INTERRUPTED, UsageError
 from ..health.rates import BusRates, RateOptions, rates_of_capture
-from ..live_runner import LiveOptions, metadata, run_demo, run_session
+from ..live_runner import LiveOptions, check_live_engine, metadata, run_demo, run_session
 from ..session.batches import session_engine
 from ..session.capture import CaptureOptions, finish_capture, open_reader, run_capture
 from ..session.listener import Listener
@@ -128,10 +128,10 @@ class UnreadCapture(Listener):
 def plot_live(opts: PlotOptions) -> int:
     """A live session in Rerun: the demo's, or the taps'."""
     if opts.demo is not None:
-        opts.live.check_engine(opts.demo.kind)  # before the rig and a viewer
+        check_live_engine(opts.live.engine, opts.demo.kind)  # before the rig and a viewer
         return _plot_demo(opts.demo, opts)
     taps = make_taps(opts.taps)  # usage errors before a viewer opens
-    opts.live.check_engine(live_kind(taps))
+    check_live_engine(opts.live.engine, live_kind(taps))
     target = chosen_target(opts.target, opts.live.output)
     made: list[Any] = []  # made once the taps are open: a source that fails makes no file
     ended: list[Session] = []
